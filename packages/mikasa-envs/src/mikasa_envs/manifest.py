@@ -1,0 +1,140 @@
+"""The MIKASA-Robo-VLA task manifest: the 90 canonical tasks plus registered extra variants.
+
+The canonical rows are the published benchmark's manifest (``data/tasks.csv``); extra
+variants (``data/extra_tasks.csv``) are registered environments that are not part of any
+benchmark split. The manifest is plain data: it does not import the simulator.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+
+SPLITS: tuple[str, ...] = ("short", "medium", "long")
+MEMORY_TYPES: tuple[str, ...] = (
+    "Object",
+    "Spatial",
+    "Capacity",
+    "Temporal",
+    "Negative",
+    "Sequential",
+    "Procedural",
+    "Prospective",
+    "Tracking",
+    "Checklist",
+)
+DATA_SOURCES: tuple[str, ...] = ("PPO", "MP")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One manifest row.
+
+    ``split`` and ``data_source`` are ``None`` for non-canonical variants.
+    """
+
+    env_id: str
+    family: str
+    split: str | None
+    memory_type: str
+    max_episode_steps: int
+    data_source: str | None
+    language_instruction: str
+    canonical: bool
+
+
+def _read(filename: str, canonical: bool) -> list[TaskSpec]:
+    text = resources.files("mikasa_envs").joinpath("data", filename).read_text(encoding="utf-8")
+    return [
+        TaskSpec(
+            env_id=row["env_id"],
+            family=row["family"],
+            split=row["split"] or None,
+            memory_type=row["memory_type"],
+            max_episode_steps=int(row["max_episode_steps"]),
+            data_source=row["data_source"] or None,
+            language_instruction=row["language_instruction"],
+            canonical=canonical,
+        )
+        for row in csv.DictReader(text.splitlines())
+    ]
+
+
+@cache
+def _all_tasks() -> tuple[TaskSpec, ...]:
+    return tuple(_read("tasks.csv", True) + _read("extra_tasks.csv", False))
+
+
+@cache
+def _by_id() -> dict[str, TaskSpec]:
+    return {t.env_id: t for t in _all_tasks()}
+
+
+def _check_choice(name: str, value: str, accepted: tuple[str, ...]) -> None:
+    if value not in accepted:
+        raise ValueError(f"unknown {name} {value!r}; accepted values: {', '.join(accepted)}")
+
+
+def families() -> tuple[str, ...]:
+    """All task family names, in manifest order."""
+    return tuple(dict.fromkeys(t.family for t in _all_tasks()))
+
+
+def list_tasks(
+    split: str | None = None,
+    memory_type: str | None = None,
+    family: str | None = None,
+    data_source: str | None = None,
+    include_extra: bool = False,
+) -> list[TaskSpec]:
+    """Tasks in manifest order, filtered by every criterion given.
+
+    ``split`` accepts ``short``, ``medium``, ``long`` or ``all``. Non-canonical variants
+    are included only with ``include_extra=True`` (they belong to no split).
+    """
+    if split == "all":
+        split = None
+    if split is not None:
+        _check_choice("split", split, SPLITS + ("all",))
+    if memory_type is not None:
+        _check_choice("memory type", memory_type, MEMORY_TYPES)
+    if family is not None:
+        _check_choice("family", family, families())
+    if data_source is not None:
+        _check_choice("data source", data_source, DATA_SOURCES)
+    return [
+        t
+        for t in _all_tasks()
+        if (include_extra or t.canonical)
+        and (split is None or t.split == split)
+        and (memory_type is None or t.memory_type == memory_type)
+        and (family is None or t.family == family)
+        and (data_source is None or t.data_source == data_source)
+    ]
+
+
+def canonical_env_ids() -> tuple[str, ...]:
+    """The 90 canonical env ids in manifest order."""
+    return tuple(t.env_id for t in _all_tasks() if t.canonical)
+
+
+def unknown_env_id_message(env_id: str, known: list[str] | tuple[str, ...] | None = None) -> str:
+    """An error message for an unknown env id that suggests the closest known ids."""
+    known = list(known if known is not None else _by_id())
+    close = difflib.get_close_matches(env_id, known, n=3, cutoff=0.6)
+    hint = f" Did you mean: {', '.join(close)}?" if close else ""
+    return (
+        f"unknown MIKASA-Robo env id {env_id!r}.{hint} "
+        f"See mikasa_envs.list_tasks() for all {len(known)} ids."
+    )
+
+
+def get_task(env_id: str) -> TaskSpec:
+    """The manifest row of ``env_id``; ``KeyError`` with close matches if unknown."""
+    try:
+        return _by_id()[env_id]
+    except KeyError:
+        raise KeyError(unknown_env_id_message(env_id)) from None
