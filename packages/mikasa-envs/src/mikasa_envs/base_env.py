@@ -1,0 +1,255 @@
+"""The base class every MIKASA-Robo-VLA task derives from.
+
+It holds what ``common.md`` says all tasks share: the Panda on the ManiSkill table, the two
+128x128 sensor cameras, the robot's initial joint configuration and noise, the
+cue / memory / action phase timing drawn from the episode seed, the language instruction,
+``task_cue`` / ``oracle_info``, reward normalisation and input validation.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+from mani_skill.utils.scene_builder.table import TableSceneBuilder
+
+from mikasa_envs.robot import LightPandaWristCam
+
+ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
+# Arm joints, then both fingers fully open.
+ROBOT_INIT_QPOS = np.array(
+    [0.0, 0.0, 0.0, -2 * np.pi / 3, 0.0, 2 * np.pi / 3, np.pi / 4, 0.04, 0.04]
+)
+NUM_ARM_JOINTS = 7
+
+OBS_MODES: tuple[str, ...] = ("state", "state_dict", "rgb", "rgbd", "sensor_data", "none")
+REWARD_MODES: tuple[str, ...] = ("normalized_dense", "dense", "sparse", "none")
+
+
+class MikasaVLABaseEnv(BaseEnv):
+    """Shared scene, cameras, robot reset, phase timing and bookkeeping of all VLA tasks.
+
+    Subclasses set the class constants, build their objects in ``_load_scene`` (after
+    calling ``super()._load_scene``), draw their layout in ``_sample_episode`` and may
+    post-process it in ``_after_phase_sampling``; see ``_initialize_episode`` for the order
+    of random draws (``common.md`` §11).
+    """
+
+    SUPPORTED_ROBOTS: ClassVar[list[str]] = ["panda", "panda_wristcam"]
+    SUPPORTED_REWARD_MODES = REWARD_MODES
+
+    LANGUAGE_INSTRUCTION: ClassVar[str] = ""
+    # Inclusive [lo, hi] ranges of the cue and empty (memory delay) phases, in steps.
+    CUE_PHASE_STEPS: ClassVar[tuple[int, int]] = (1, 5)
+    EMPTY_PHASE_STEPS: ClassVar[tuple[int, int]] = (1, 5)
+    # The dense reward of a success step; normalized_dense divides by it.
+    DENSE_REWARD_MAX: ClassVar[float] = 3.0
+
+    SENSOR_SIZE: ClassVar[int] = 128
+    BASE_CAMERA_EYE: ClassVar[tuple[float, float, float]] = (0.3, 0.0, 0.6)
+    BASE_CAMERA_TARGET: ClassVar[tuple[float, float, float]] = (-0.1, 0.0, 0.1)
+    RENDER_CAMERA_EYE: ClassVar[tuple[float, float, float]] = (0.5, 1.0, 1.0)
+    RENDER_CAMERA_TARGET: ClassVar[tuple[float, float, float]] = (-0.3, 0.0, 0.0)
+
+    agent: LightPandaWristCam
+
+    def __init__(
+        self,
+        *args: Any,
+        robot_uids: str = "panda_wristcam",
+        robot_init_qpos_noise: float = 0.02,
+        **kwargs: Any,
+    ) -> None:
+        if robot_uids not in self.SUPPORTED_ROBOTS:
+            raise UnsupportedRobotError(
+                f"robot_uids={robot_uids!r} is not supported by {type(self).__name__}; "
+                f"accepted values: {', '.join(self.SUPPORTED_ROBOTS)}"
+            )
+        _check_mode("obs_mode", kwargs.get("obs_mode"), OBS_MODES, allow_texture_combos=True)
+        _check_mode("reward_mode", kwargs.get("reward_mode"), REWARD_MODES)
+        self.robot_init_qpos_noise = robot_init_qpos_noise
+        self.task_cue: torch.Tensor | None = None
+        self.oracle_info: torch.Tensor | None = None
+        self._reward_dict: dict[str, torch.Tensor] | None = None
+        try:
+            super().__init__(*args, robot_uids=robot_uids, **kwargs)
+        except AssertionError as err:
+            # ManiSkill asserts on an unknown control mode; name the accepted ones.
+            if "control_mode" in kwargs and "supported" in str(err).lower():
+                raise ValueError(f"unknown control_mode: {err}") from None
+            raise
+
+    # ------------------------------------------------------------------ scene
+    @property
+    def _default_sensor_configs(self) -> list[CameraConfig]:
+        pose = sapien_utils.look_at(eye=self.BASE_CAMERA_EYE, target=self.BASE_CAMERA_TARGET)
+        size = self.SENSOR_SIZE
+        return [CameraConfig("base_camera", pose, size, size, np.pi / 2, 0.01, 100)]
+
+    @property
+    def _default_human_render_camera_configs(self) -> CameraConfig:
+        pose = sapien_utils.look_at(eye=self.RENDER_CAMERA_EYE, target=self.RENDER_CAMERA_TARGET)
+        return CameraConfig("render_camera", pose, 512, 512, 1.0, 0.01, 100)
+
+    def _load_agent(self, options: dict) -> None:
+        # The wrist-camera Panda is loaded with a light housing mesh (see robot.py); the uid
+        # stays "panda_wristcam" so scene builders and users see the usual robot.
+        robot_uids = self.robot_uids
+        if robot_uids == "panda_wristcam":
+            self.robot_uids = LightPandaWristCam
+        try:
+            super()._load_agent(options, sapien.Pose(p=ROBOT_ROOT_POSITION))
+        finally:
+            self.robot_uids = robot_uids
+
+    def _load_scene(self, options: dict) -> None:
+        self.table_scene = TableSceneBuilder(self, robot_init_qpos_noise=self.robot_init_qpos_noise)
+        self.table_scene.build()
+        n = self.num_envs
+        self.cue_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
+        self.empty_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
+        self._prev_action: torch.Tensor | None = None
+
+    # ------------------------------------------------------------- episodes
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:
+        with torch.device(self.device):
+            # 1. The table builder resets the robot with its own noise (draws discarded).
+            self.table_scene.initialize(env_idx)
+            # 2-3. The task's answer (numpy) and layout (torch).
+            self._sample_episode(env_idx, options)
+            # 4. Arm joint noise (numpy), then the task's own robot pose.
+            self._reset_robot(env_idx)
+            # 5. Phase lengths (torch): C for all reset envs, then E.
+            self._sample_phase_lengths(env_idx)
+            # 6. Layout post-processing that upstream draws after the phases.
+            self._after_phase_sampling(env_idx)
+            if self._prev_action is not None:
+                self._prev_action[env_idx] = 0
+            self._reward_dict = None
+            self._on_episode_start(env_idx)
+
+    def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
+        """Draw the episode's answer and object layout for the envs in ``env_idx``."""
+
+    def _after_phase_sampling(self, env_idx: torch.Tensor) -> None:
+        """Layout steps that draw random numbers after the phase lengths."""
+
+    def _on_episode_start(self, env_idx: torch.Tensor) -> None:
+        """Put the scene into its t = 0 state."""
+
+    def _reset_robot(self, env_idx: torch.Tensor) -> None:
+        # Each env draws its joint noise from its own episode RNG (upstream shared env 0's
+        # draw across the batch; identical for env 0, see DEVIATIONS.md).
+        noise = np.stack(
+            [
+                self._batched_episode_rng[int(i)].normal(0, self.robot_init_qpos_noise, NUM_ARM_JOINTS)
+                for i in env_idx.cpu().numpy()
+            ]
+        )
+        qpos = np.tile(ROBOT_INIT_QPOS, (len(env_idx), 1))
+        qpos[:, :NUM_ARM_JOINTS] += noise
+        self.agent.reset(torch.as_tensor(qpos, dtype=torch.float32, device=self.device))
+        self.agent.robot.set_pose(sapien.Pose(p=ROBOT_ROOT_POSITION))
+
+    # ---------------------------------------------------------------- phases
+    def _sample_phase_lengths(self, env_idx: torch.Tensor) -> None:
+        b = len(env_idx)
+        cue_lo, cue_hi = self.CUE_PHASE_STEPS
+        empty_lo, empty_hi = self.EMPTY_PHASE_STEPS
+        self.cue_steps_per_env[env_idx] = torch.randint(cue_lo, cue_hi + 1, (b,), device=self.device)
+        self.empty_steps_per_env[env_idx] = torch.randint(
+            empty_lo, empty_hi + 1, (b,), device=self.device
+        )
+
+    @property
+    def action_phase_start(self) -> torch.Tensor:
+        """Per env, the first ``elapsed_steps`` value of the action phase (C + E)."""
+        return self.cue_steps_per_env + self.empty_steps_per_env
+
+    def phase_masks(self, t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Per env (cue, empty, action) boolean masks for elapsed-step values ``t``."""
+        cue = t < self.cue_steps_per_env
+        action = t >= self.action_phase_start
+        return cue, ~cue & ~action, action
+
+    # ------------------------------------------------------------- stepping
+    def step(self, action: Any):
+        """ManiSkill's step with input checks; episodes end only by truncation."""
+        self._check_action(action)
+        obs, reward, _, truncated, info = super().step(action)
+        # Upstream returns terminated & ~success: success never ends an episode, and no
+        # selection task defines a failure, so only a family's "fail" can terminate.
+        if "fail" in info:
+            terminated = info["fail"] & ~info["success"]
+        else:
+            terminated = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        return obs, reward, terminated, truncated, info
+
+    def _check_action(self, action: Any) -> None:
+        if action is None or isinstance(action, dict):
+            return
+        if not isinstance(action, (np.ndarray, torch.Tensor)):
+            raise TypeError(
+                f"action must be a numpy array or torch tensor, got {type(action).__name__}"
+            )
+        single = tuple(self.single_action_space.shape)
+        shape = tuple(action.shape)
+        if shape != single and shape != (self.num_envs, *single):
+            raise ValueError(
+                f"action has shape {shape}; control mode {self.control_mode!r} expects "
+                f"{(self.num_envs, *single)} or {single}"
+            )
+        is_nan = torch.isnan(action).any() if isinstance(action, torch.Tensor) else np.isnan(action).any()
+        if bool(is_nan):
+            raise ValueError("action contains NaN; every action value must be a finite number")
+
+    def get_info(self) -> dict:
+        """ManiSkill's info plus the keys every MIKASA task reports (``common.md`` §6)."""
+        info = super().get_info()
+        info["task_cue"] = self.task_cue
+        info["language_instruction"] = self.LANGUAGE_INSTRUCTION
+        info["oracle_info"] = self.oracle_info
+        # The reward is computed after the info, so this is the previous step's dict (as upstream).
+        info["reward_dict"] = self._reward_dict
+        return info
+
+    # --------------------------------------------------------------- reward
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
+        """Dense reward divided by its success value, clipped to [0, 1]."""
+        dense = self.compute_dense_reward(obs=obs, action=action, info=info)
+        return (dense / self.DENSE_REWARD_MAX).clamp(0.0, 1.0)
+
+    def _action_smoothness_terms(self, action: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(‖a‖, ‖a − a_prev‖) per env; the delta is 0 on an episode's first step."""
+        if action is None:
+            zeros = torch.zeros(self.num_envs, device=self.device)
+            return zeros, zeros
+        action = action.reshape(self.num_envs, -1).float()
+        if self._prev_action is None or self._prev_action.shape != action.shape:
+            self._prev_action = torch.zeros_like(action)
+        delta = torch.linalg.norm(action - self._prev_action, dim=-1)
+        delta = torch.where(self.elapsed_steps <= 1, torch.zeros_like(delta), delta)
+        self._prev_action = action.clone()
+        return torch.linalg.norm(action, dim=-1), delta
+
+    @property
+    def arm_qvel(self) -> torch.Tensor:
+        """(B, 7) arm joint velocities (fingers excluded)."""
+        return self.agent.robot.get_qvel()[..., :NUM_ARM_JOINTS]
+
+
+class UnsupportedRobotError(ValueError, NotImplementedError):
+    """A robot uid the task does not support (upstream raised NotImplementedError)."""
+
+
+def _check_mode(name: str, value: str | None, accepted: tuple[str, ...], allow_texture_combos: bool = False) -> None:
+    if value is None or value in accepted:
+        return
+    if allow_texture_combos and all(part in ("rgb", "depth", "segmentation", "normal", "albedo", "position") for part in value.split("+")):
+        return
+    raise ValueError(f"unknown {name} {value!r}; accepted values: {', '.join(accepted)}")

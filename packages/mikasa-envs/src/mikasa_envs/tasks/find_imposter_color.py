@@ -1,0 +1,60 @@
+"""FindImposterColor: see N−1 coloured cubes, then touch the colour that was missing."""
+
+from __future__ import annotations
+
+from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
+from mikasa_envs.building_blocks.object_sets import palette_cubes
+from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, jitter_sequential, line_or_arc_slots
+
+
+class FindImposterColorVLABaseEnv(FindImposterVLABaseEnv):
+    """**Task Description:** N−1 of N differently coloured cubes are shown at their slots;
+    then nothing is visible for a delay; then all N cubes reappear with their slots
+    permuted. Bring the TCP to the cube whose colour was not shown and hold still.
+
+    **Randomizations:** the imposter; slot jitter (σ = 1 cm, ≥ 6 cm apart) and assignment;
+    a non-identity permutation of the slots for the action phase; cue and delay lengths;
+    arm joint noise.
+
+    **Success Conditions:** in the action phase, the TCP is within 5 cm of the imposter's
+    centre and every arm joint moves slower than 0.2 rad/s.
+    """
+
+    LANGUAGE_INSTRUCTION = (
+        "Observe the cubes shown, wait, then touch the cube whose color was not present before."
+    )
+    COLORS: int = 3
+    CUBE_HALFSIZE = CUBE_HALF_SIZE
+
+    def _load_objects(self):
+        objects = palette_cubes(self.scene, self.COLORS)
+        self.color_dict = objects.descriptions
+        self.cubes = dict(enumerate(objects.actors))
+        return objects
+
+    def _sample_episode(self, env_idx, options):
+        self._sample_answer(env_idx)
+        slots = line_or_arc_slots(self.COLORS)
+        self._set_imposter_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
+
+
+@register_task("FindImposterColor3-VLA-v0")
+class FindImposterColor3VLAEnv(FindImposterColorVLABaseEnv):
+    """FindImposterColor with 3 cubes."""
+
+    COLORS = 3
+
+
+@register_task("FindImposterColor5-VLA-v0")
+class FindImposterColor5VLAEnv(FindImposterColorVLABaseEnv):
+    """FindImposterColor with 5 cubes."""
+
+    COLORS = 5
+
+
+@register_task("FindImposterColor9-VLA-v0")
+class FindImposterColor9VLAEnv(FindImposterColorVLABaseEnv):
+    """FindImposterColor with 9 cubes."""
+
+    COLORS = 9

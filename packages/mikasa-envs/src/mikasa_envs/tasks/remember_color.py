@@ -1,0 +1,88 @@
+"""RememberColor: remember one cube's colour, then touch the cube of that colour."""
+
+from __future__ import annotations
+
+from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
+from mikasa_envs.building_blocks.object_sets import palette_cubes
+from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._selection import RememberVLABaseEnv, jitter_sequential, line_or_arc_slots
+
+
+class RememberColorVLABaseEnv(RememberVLABaseEnv):
+    """**Task Description:** one cube is shown at the centre of the table; then nothing is
+    visible for a delay; then all N differently coloured cubes appear at new places. Bring
+    the TCP to the cube of the remembered colour and hold still.
+
+    **Randomizations:** the answer colour; slot jitter (σ = 1 cm, ≥ 6 cm apart) and a random
+    assignment of cubes to slots; for N = 3 the cubes are spread ~0.2 m apart along y; cue
+    and delay lengths; arm joint noise.
+
+    **Success Conditions:** in the action phase, the TCP is within 5 cm of the answer cube's
+    centre and every arm joint moves slower than 0.2 rad/s.
+    """
+
+    LANGUAGE_INSTRUCTION = "Observe the cube's color, wait, then touch the cube of the same color."
+    COLORS: int = 3
+    CUBE_HALFSIZE = CUBE_HALF_SIZE
+    SPREAD_WHEN_THREE = True
+
+    def _load_objects(self):
+        objects = palette_cubes(self.scene, self.COLORS)
+        self.color_dict = objects.descriptions
+        self.cubes = dict(enumerate(objects.actors))
+        return objects
+
+    def _sample_episode(self, env_idx, options):
+        self._sample_answer(env_idx)
+        slots = line_or_arc_slots(self.COLORS)
+        self._set_remember_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
+
+    @property
+    def true_color_indices(self):
+        """The answer colour key, uint8 (B,)."""
+        return self.oracle_info
+
+
+@register_task("RememberColor3-VLA-v0")
+class RememberColor3VLAEnv(RememberColorVLABaseEnv):
+    """RememberColor with 3 cubes."""
+
+    COLORS = 3
+
+
+@register_task("RememberColor5-VLA-v0")
+class RememberColor5VLAEnv(RememberColorVLABaseEnv):
+    """RememberColor with 5 cubes."""
+
+    COLORS = 5
+
+
+@register_task("RememberColor9-VLA-v0")
+class RememberColor9VLAEnv(RememberColorVLABaseEnv):
+    """RememberColor with 9 cubes."""
+
+    COLORS = 9
+
+
+@register_task("RememberColor3-Long-VLA-v0")
+class RememberColor3LongVLAEnv(RememberColor3VLAEnv):
+    """RememberColor with 3 cubes, a 10-100 step cue and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (10, 100)
+    EMPTY_PHASE_STEPS = (50, 450)
+
+
+@register_task("RememberColor5-Long-VLA-v0")
+class RememberColor5LongVLAEnv(RememberColor5VLAEnv):
+    """RememberColor with 5 cubes, a fixed 100-step cue (as upstream) and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (100, 100)
+    EMPTY_PHASE_STEPS = (50, 450)
+
+
+@register_task("RememberColor9-Long-VLA-v0")
+class RememberColor9LongVLAEnv(RememberColor9VLAEnv):
+    """RememberColor with 9 cubes, a fixed 100-step cue (as upstream) and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (100, 100)
+    EMPTY_PHASE_STEPS = (50, 450)

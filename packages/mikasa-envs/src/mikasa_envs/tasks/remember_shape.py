@@ -1,0 +1,91 @@
+"""RememberShape: remember one object's shape, then touch the object of that shape."""
+
+from __future__ import annotations
+
+from mikasa_envs.building_blocks.object_sets import blue_shapes
+from mikasa_envs.building_blocks.shapes import SHAPE_REST_Z, SHAPE_SCALE
+from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._selection import RememberVLABaseEnv, jitter_sequential, line_or_arc_slots
+
+
+class RememberShapeVLABaseEnv(RememberVLABaseEnv):
+    """**Task Description:** one blue object is shown at the centre of the table; then
+    nothing is visible for a delay; then all N blue objects of different shapes appear at
+    new places. Bring the TCP to the object of the remembered shape and hold still.
+
+    **Randomizations:** the answer shape; slot jitter (σ = 1 cm, ≥ 6 cm apart) and a random
+    assignment of objects to slots; for N = 3 the objects are spread ~0.2 m apart along y;
+    cue and delay lengths; arm joint noise.
+
+    **Success Conditions:** in the action phase, the TCP is within 5 cm of the answer
+    object's origin and every arm joint moves slower than 0.2 rad/s.
+    """
+
+    LANGUAGE_INSTRUCTION = "Observe the object's shape, wait, then touch the object of the same shape."
+    SHAPES: int = 3
+    SHAPE_SCALE = SHAPE_SCALE
+    # Objects teleported onto the table are held in place for 3 frames (upstream).
+    APPEAR_SETTLE_STEPS = 3
+    SPREAD_WHEN_THREE = True
+
+    def _load_objects(self):
+        objects = blue_shapes(self.scene, self.SHAPES)
+        self.shape_dict = objects.descriptions
+        self.shape_actors = dict(enumerate(objects.actors))
+        self.shape_resting_z = {k: SHAPE_REST_Z[name] for k, name in self.shape_dict.items()}
+        return objects
+
+    def _sample_episode(self, env_idx, options):
+        self._sample_answer(env_idx)
+        slots = line_or_arc_slots(self.SHAPES)
+        self._set_remember_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
+
+    @property
+    def true_shape_indices(self):
+        """The answer shape key, uint8 (B,)."""
+        return self.oracle_info
+
+
+@register_task("RememberShape3-VLA-v0")
+class RememberShape3VLAEnv(RememberShapeVLABaseEnv):
+    """RememberShape with cube, sphere, cylinder."""
+
+    SHAPES = 3
+
+
+@register_task("RememberShape5-VLA-v0")
+class RememberShape5VLAEnv(RememberShapeVLABaseEnv):
+    """RememberShape with 5 shapes (+ cross, torus)."""
+
+    SHAPES = 5
+
+
+@register_task("RememberShape9-VLA-v0")
+class RememberShape9VLAEnv(RememberShapeVLABaseEnv):
+    """RememberShape with all 9 shapes."""
+
+    SHAPES = 9
+
+
+@register_task("RememberShape3-Long-VLA-v0")
+class RememberShape3LongVLAEnv(RememberShape3VLAEnv):
+    """RememberShape3 with a 10-100 step cue and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (10, 100)
+    EMPTY_PHASE_STEPS = (50, 450)
+
+
+@register_task("RememberShape5-Long-VLA-v0")
+class RememberShape5LongVLAEnv(RememberShape5VLAEnv):
+    """RememberShape5 with a 10-100 step cue and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (10, 100)
+    EMPTY_PHASE_STEPS = (50, 450)
+
+
+@register_task("RememberShape9-Long-VLA-v0")
+class RememberShape9LongVLAEnv(RememberShape9VLAEnv):
+    """RememberShape9 with a 10-100 step cue and a 50-450 step delay."""
+
+    CUE_PHASE_STEPS = (10, 100)
+    EMPTY_PHASE_STEPS = (50, 450)
