@@ -132,9 +132,16 @@ def unknown_env_id_message(env_id: str, known: list[str] | tuple[str, ...] | Non
     )
 
 
+class UnknownEnvIdError(KeyError, ValueError):
+    """An env id that is not a MIKASA-Robo task (the message suggests close matches)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 def get_task(env_id: str) -> TaskSpec:
-    """The manifest row of ``env_id``; ``KeyError`` with close matches if unknown."""
+    """The manifest row of ``env_id``; ``UnknownEnvIdError`` with close matches if unknown."""
     try:
         return _by_id()[env_id]
     except KeyError:
-        raise KeyError(unknown_env_id_message(env_id)) from None
+        raise UnknownEnvIdError(unknown_env_id_message(env_id)) from None

@@ -6,10 +6,11 @@ Families differ in the objects (cubes / shapes / shape-colour pairs), the slot l
 what the cue shows; the phase-dependent placement, success, reward and privileged state
 live here once.
 
-Placement uses the pre-physics pin of ``common.md`` §10 (mechanism 2) for every family:
-before each physics substep of a step that produces a cue, empty or settle frame, every
-object is written to its phase pose with zero velocity, so hidden objects stay put and
-hiding is physical on CPU and GPU alike.
+Placement is physical for every family (``common.md`` §10, mechanism 2, recommended):
+for a step that produces a cue, empty or settle frame, every object is written to its
+phase pose with zero velocity before the physics substeps (so the robot meets the layout
+of the frame it is producing) and again after them (so the frame shows it exactly). The
+writes reach PhysX on GPU too, so hiding is not visual-only there.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
+import sapien
 import torch
 from mani_skill.utils.structs import Actor, Pose
 
@@ -62,6 +64,9 @@ def jitter_sequential(
                 out[i] = candidate
                 break
     return out
+
+
+_ZERO3 = np.zeros(3, dtype=np.float32)
 
 
 def _min_pairwise_distance(xy: torch.Tensor) -> torch.Tensor:
@@ -216,7 +221,17 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         idx = torch.nonzero(env_mask).flatten()
         if len(idx) == 0:
             return
-        # ManiSkill writes only the rows of envs flagged in the scene's reset mask.
+        if not self.gpu_sim_enabled:
+            # CPU sim (one env): set the SAPIEN bodies directly; ManiSkill's batched setters
+            # cost ~10x more per call and this runs twice per step in pinned phases.
+            rows = poses[0].cpu().numpy().astype(np.float64)
+            for actor, row in zip(self.task_objects, rows):
+                actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
+                body = actor._bodies[0]
+                body.linear_velocity = _ZERO3
+                body.angular_velocity = _ZERO3
+            return
+        # GPU: ManiSkill writes only the rows of envs flagged in the scene's reset mask.
         saved_mask = self.scene._reset_mask.clone()
         self.scene._reset_mask[:] = False
         self.scene._reset_mask[idx] = True
@@ -226,8 +241,7 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
             actor.set_linear_velocity(zeros)
             actor.set_angular_velocity(zeros)
         self.scene._reset_mask[:] = saved_mask
-        if self.gpu_sim_enabled:
-            self.scene.px.gpu_apply_rigid_dynamic_data()
+        self.scene.px.gpu_apply_rigid_dynamic_data()
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         self.manip_layout_applied[env_idx] = False
@@ -237,24 +251,24 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         self._write_object_poses(mask & write, poses)
 
     def _before_control_step(self) -> None:
-        self._substep = 0
-
-    def _before_simulation_step(self) -> None:
-        # The frame this step produces is elapsed_steps + 1 (incremented after physics).
-        write, poses = self._phase_poses(self.elapsed_steps + 1, first_substep=self._substep == 0)
+        # Lay out the frame this step produces (elapsed_steps + 1; the counter is incremented
+        # after physics) before the first substep, so the robot meets the new layout.
+        write, poses = self._phase_poses(self.elapsed_steps + 1, first_substep=True)
         self._write_object_poses(write, poses)
-        self._substep += 1
 
     def _after_control_step(self) -> None:
-        # Pin once more after the last substep so the frame shows pinned objects exactly at
-        # their phase poses (not 0.5 mm into a substep's free fall, nor nudged by hidden
-        # neighbours colliding at z = 1000).
+        # Pin again after the last substep: pinned objects show exactly at their phase poses,
+        # undoing any push by the robot, the fall of hidden objects parked at z = 1000 and
+        # collisions between them.
         write, poses = self._phase_poses(self.elapsed_steps + 1, first_substep=False)
         self._write_object_poses(write, poses)
 
     # --------------------------------------------------------------- queries
     def object_positions(self) -> torch.Tensor:
         """(B, N, 3) current origins of the candidate objects."""
+        if not self.gpu_sim_enabled:
+            positions = np.array([a._objs[0].pose.p for a in self.task_objects], dtype=np.float32)
+            return torch.from_numpy(positions)[None].to(self.device)
         return torch.stack([a.pose.p for a in self.task_objects], dim=1)
 
     def target_position(self) -> torch.Tensor:

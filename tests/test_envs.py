@@ -1,0 +1,117 @@
+"""Every registered env: construction, observation contract, info keys, rewards."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from conftest import REGISTERED_IDS
+
+from mikasa_envs import get_task
+from mikasa_envs.base_env import MikasaVLABaseEnv
+from mikasa_wrappers import apply_mikasa_vla_wrappers
+
+INFO_KEYS = {
+    "elapsed_steps",
+    "obj_to_goal_pos",
+    "is_obj_placed",
+    "is_robot_static",
+    "success",
+    "task_cue",
+    "language_instruction",
+    "oracle_info",
+    "reward_dict",
+}
+
+
+def _state_dim(env) -> int:
+    base = env.unwrapped
+    oracle = 1 if base.oracle_info.ndim == 1 else base.oracle_info.shape[1]
+    return 9 + 9 + 7 + oracle + 3 * base.num_objects
+
+
+@pytest.mark.parametrize("env_id", REGISTERED_IDS)
+def test_state_mode_contract(make_env, env_id):
+    env = make_env(env_id, reward_mode="normalized_dense")
+    base: MikasaVLABaseEnv = env.unwrapped
+    obs, info = env.reset(seed=7)
+    assert obs.dtype == torch.float32 and obs.shape == (1, _state_dim(env))
+    assert INFO_KEYS - {"reward_dict"} <= set(info)
+    assert info["language_instruction"] == get_task(env_id).language_instruction
+    assert info["task_cue"] is None and info["reward_dict"] is None
+    assert info["oracle_info"].dtype == torch.uint8
+    lo, hi = base.CUE_PHASE_STEPS
+    assert lo <= int(base.cue_steps_per_env[0]) <= hi
+    lo, hi = base.EMPTY_PHASE_STEPS
+    assert lo <= int(base.empty_steps_per_env[0]) <= hi
+    rewards = []
+    for _ in range(3):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
+        rewards.append(float(reward[0]))
+        assert set(info) >= INFO_KEYS
+        assert not bool(terminated[0]) and not bool(truncated[0])
+        assert obs.shape == (1, _state_dim(env))
+    assert all(0.0 <= r <= 1.0 for r in rewards)
+    # reward_dict is one step stale (computed after the info is built), as upstream.
+    assert info["reward_dict"] is not None and "reaching_reward" in info["reward_dict"]
+
+
+@pytest.mark.parametrize("env_id", REGISTERED_IDS)
+def test_rgb_mode_through_canonical_wrappers(make_env, env_id):
+    env = apply_mikasa_vla_wrappers(make_env(env_id, obs_mode="rgb", reward_mode="normalized_dense"))
+    obs, info = env.reset(seed=3)
+    assert list(obs) == ["proprio", "rgb"]
+    assert obs["rgb"].shape == (1, 128, 128, 6) and obs["rgb"].dtype == torch.uint8
+    assert obs["proprio"].shape == (1, 7) and obs["proprio"].dtype == torch.float32
+    obs, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
+    assert obs["rgb"].shape == (1, 128, 128, 6)
+    assert 0.0 <= float(reward[0]) <= 1.0
+    assert info["language_instruction"] == get_task(env_id).language_instruction
+    assert env.max_episode_steps == get_task(env_id).max_episode_steps
+    # Both cameras see something (not a blank frame).
+    assert obs["rgb"][..., :3].float().std() > 5 and obs["rgb"][..., 3:].float().std() > 5
+
+
+def test_truncates_at_manifest_horizon(make_env):
+    env = make_env("RememberColor3-VLA-v0")
+    env.reset(seed=0)
+    for step in range(1, 26):
+        *_, truncated, info = env.step(None)
+        assert bool(truncated[0]) == (step >= 25)
+
+
+def test_max_episode_steps_override(make_env):
+    env = make_env("RememberShape3-VLA-v0", max_episode_steps=5)
+    env.reset(seed=0)
+    for step in range(1, 6):
+        *_, truncated, _ = env.step(None)
+    assert bool(truncated[0])
+
+
+@pytest.mark.parametrize("reward_mode", ["sparse", "dense", "none"])
+def test_reward_modes(make_env, reward_mode):
+    env = make_env("FindImposterColor3-VLA-v0", reward_mode=reward_mode)
+    env.reset(seed=1)
+    _, reward, *_ = env.step(np.zeros(7, dtype=np.float32))
+    if reward_mode == "dense":
+        # A still robot far from the (hidden) target earns ≈ 0.5 (stillness term).
+        assert 0.4 < float(reward[0]) < 0.6
+    else:
+        assert float(reward[0]) == 0.0
+
+
+@pytest.mark.parametrize(
+    "control_mode, action_dim",
+    [("pd_joint_delta_pos", 8), ("pd_joint_pos", 8), ("pd_ee_delta_pos", 4), ("pd_ee_delta_pose", 7)],
+)
+def test_other_panda_control_modes(make_env, control_mode, action_dim):
+    env = make_env("RememberColor5-VLA-v0", control_mode=control_mode)
+    env.reset(seed=0)
+    assert env.action_space.shape == (action_dim,)
+    env.step(env.action_space.sample())
+
+
+def test_panda_without_wrist_camera(make_env):
+    env = make_env("RememberColor3-VLA-v0", obs_mode="rgb", robot_uids="panda")
+    obs, _ = env.reset(seed=0)
+    assert list(obs["sensor_data"]) == ["base_camera"]

@@ -1,0 +1,72 @@
+"""The task manifest: contents, filters, errors, and agreement with the registry."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import gymnasium as gym
+import pytest
+from conftest import REGISTERED_IDS
+from mani_skill.utils.registration import REGISTERED_ENVS
+
+from mikasa_envs import manifest
+
+
+def test_ninety_canonical_tasks_with_published_taxonomy():
+    tasks = manifest.list_tasks()
+    assert len(tasks) == 90
+    assert len({t.env_id for t in tasks}) == 90
+    assert all(t.canonical and t.env_id.endswith("-VLA-v0") for t in tasks)
+    counts = sorted(Counter(t.memory_type for t in tasks).values(), reverse=True)
+    assert counts == [18, 14, 12, 12, 9, 6, 6, 5, 4, 4]
+    assert Counter(t.split for t in tasks) == {"short": 38, "medium": 30, "long": 22}
+    assert {t.data_source for t in tasks} == {"PPO", "MP"}
+
+
+def test_filters_combine():
+    short_object = manifest.list_tasks(split="short", memory_type="Object")
+    assert [t.env_id for t in short_object][:3] == [
+        "RememberColor3-VLA-v0",
+        "RememberColor5-VLA-v0",
+        "RememberColor9-VLA-v0",
+    ]
+    assert all(t.split == "short" and t.memory_type == "Object" for t in short_object)
+    assert len(manifest.list_tasks(split="all")) == 90
+    assert len(manifest.list_tasks(family="find_imposter_color")) == 3
+    assert all(t.data_source == "MP" for t in manifest.list_tasks(data_source="MP"))
+
+
+def test_extra_variants_are_flagged_non_canonical():
+    extra = [t for t in manifest.list_tasks(include_extra=True) if not t.canonical]
+    assert {t.env_id for t in extra} >= {"ShellGamePick-VLA-v0", "BatteriesCheckerEasy-9-VLA-v0"}
+    assert all(t.split is None for t in extra)
+
+
+@pytest.mark.parametrize(
+    "kwargs, needle",
+    [
+        (dict(split="tiny"), "short, medium, long, all"),
+        (dict(memory_type="Episodic"), "Object"),
+        (dict(family="nope"), "remember_color"),
+        (dict(data_source="human"), "PPO, MP"),
+    ],
+)
+def test_bad_filter_names_accepted_values(kwargs, needle):
+    with pytest.raises(ValueError, match=needle):
+        manifest.list_tasks(**kwargs)
+
+
+def test_unknown_id_suggests_close_matches():
+    with pytest.raises(KeyError, match="RememberColor3-VLA-v0"):
+        manifest.get_task("RememberColr3-VLA-v0")
+    with pytest.raises(ValueError, match="Did you mean"):
+        manifest.get_task("FindImposterColour3-VLA-v0")
+
+
+def test_registered_horizons_equal_manifest():
+    assert len(REGISTERED_IDS) >= 27
+    for env_id in REGISTERED_IDS:
+        task = manifest.get_task(env_id)
+        assert REGISTERED_ENVS[env_id].max_episode_steps == task.max_episode_steps
+        assert gym.spec(env_id).max_episode_steps == task.max_episode_steps
+        assert REGISTERED_ENVS[env_id].cls.LANGUAGE_INSTRUCTION == task.language_instruction
