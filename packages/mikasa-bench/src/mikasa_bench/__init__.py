@@ -1,3 +1,113 @@
-"""MIKASA-Robo bench."""
+"""mikasa-bench: evaluate policies on MIKASA-Robo-VLA with the canonical protocol.
+
+Command line: ``mikasa-bench quickstart | list | run | report | compare`` (see the README).
+Library: the protocol constants, task selection, the policy interface, the episode loop,
+the parallel resumable runner and the result/report helpers are re-exported here.
+"""
+
+from .episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
+from .errors import BenchError, EpisodeFailedError, PolicyOutputError, UnknownTaskError
+from .executor import (
+    EpisodeJob,
+    EpisodeOutcome,
+    Executor,
+    InlineExecutor,
+    LocalExecutor,
+    make_executor,
+)
+from .metrics import newcombe_difference_interval, summarize_task_results, wilson_interval
+from .policies import (
+    BUILTIN_POLICIES,
+    ChunkPolicy,
+    DummyChunkPolicy,
+    PolicySpec,
+    RandomPolicy,
+    ZeroPolicy,
+    build_policy,
+    resolve_policy,
+)
+from .protocol import (
+    CONTROL_MODE,
+    NUM_EPISODES_PER_TASK,
+    OBS_MODE,
+    REWARD_MODE,
+    START_SEED,
+    SUPPORTED_SPLITS,
+    WRAPPER_CHAIN,
+    BenchmarkConfig,
+)
+from .results import (
+    RunData,
+    RunStore,
+    build_summary,
+    build_task_result,
+    load_run,
+    write_benchmark_results,
+)
+from .runner import evaluate_benchmark, evaluate_task, execute_runs
+from .tasks import (
+    BenchmarkTask,
+    benchmark_commit,
+    default_task_csv_path,
+    load_benchmark_tasks,
+    make_run_dir,
+    repository_root,
+    resolve_tasks,
+    select_benchmark_tasks,
+)
 
 __version__ = "0.1.0"
+
+__all__ = [
+    "START_SEED",
+    "NUM_EPISODES_PER_TASK",
+    "OBS_MODE",
+    "CONTROL_MODE",
+    "REWARD_MODE",
+    "WRAPPER_CHAIN",
+    "SUPPORTED_SPLITS",
+    "BenchmarkConfig",
+    "BenchmarkTask",
+    "load_benchmark_tasks",
+    "select_benchmark_tasks",
+    "resolve_tasks",
+    "default_task_csv_path",
+    "repository_root",
+    "make_run_dir",
+    "benchmark_commit",
+    "ChunkPolicy",
+    "ZeroPolicy",
+    "RandomPolicy",
+    "DummyChunkPolicy",
+    "PolicySpec",
+    "BUILTIN_POLICIES",
+    "resolve_policy",
+    "build_policy",
+    "EpisodeResult",
+    "make_benchmark_env",
+    "normalize_action_chunk",
+    "run_episode",
+    "evaluate_task",
+    "evaluate_benchmark",
+    "execute_runs",
+    "EpisodeJob",
+    "EpisodeOutcome",
+    "Executor",
+    "LocalExecutor",
+    "InlineExecutor",
+    "make_executor",
+    "wilson_interval",
+    "newcombe_difference_interval",
+    "summarize_task_results",
+    "build_summary",
+    "build_task_result",
+    "write_benchmark_results",
+    "RunStore",
+    "RunData",
+    "load_run",
+    "BenchError",
+    "UnknownTaskError",
+    "PolicyOutputError",
+    "EpisodeFailedError",
+    "__version__",
+]

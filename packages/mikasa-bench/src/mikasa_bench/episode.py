@@ -1,0 +1,240 @@
+"""Environment construction and the episode loop (benchmark.md §5, §6).
+
+`run_episode` is the single place where a policy meets an env; the in-process API
+(`evaluate_task`) and the worker processes of the executors both use it, so every path
+produces the same numbers.
+"""
+
+from __future__ import annotations
+
+import random
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import PolicyOutputError
+from .policies import reset_policy
+from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
+
+__all__ = [
+    "EpisodeResult",
+    "make_benchmark_env",
+    "normalize_action_chunk",
+    "run_episode",
+    "seed_global_rngs",
+]
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """Outcome of one episode: the success latch, summed reward, steps taken, seed."""
+
+    success_once: bool
+    episode_return: float
+    n_steps: int
+    seed: int
+
+
+def seed_global_rngs(seed: int) -> None:
+    """Seed python's, numpy's and torch's global RNGs (stochastic policies that draw from
+    them become reproducible and independent of which worker runs the episode)."""
+    import torch
+
+    s = int(seed) % (2**32)
+    random.seed(s)
+    np.random.seed(s)
+    torch.manual_seed(s)
+
+
+def _first(x: Any) -> Any:
+    """First element of a batched value (tensor, array, list) or the value itself."""
+    if hasattr(x, "reshape") and hasattr(x, "shape"):
+        flat = x.reshape(-1)
+        return flat[0] if len(flat) else False
+    if isinstance(x, (list, tuple)):
+        return x[0] if x else False
+    return x
+
+
+def normalize_action_chunk(output: Any, action_shape: Sequence[int]) -> list[Any]:
+    """Split a policy output into a list of float32 torch actions of shape ``action_shape``.
+
+    Accepted: ``A`` (one action), ``(K, *A)`` or ``(1, K, *A)`` as a torch tensor or numpy
+    array (array-likes are converted). Anything else raises `PolicyOutputError` naming the
+    expected shapes; an empty chunk (``K == 0``) too.
+    """
+    import torch
+
+    a = tuple(int(d) for d in action_shape)
+    if isinstance(output, torch.Tensor):
+        t = output.detach()
+    else:
+        try:
+            arr = np.asarray(output)
+        except Exception as exc:  # ragged lists etc.
+            raise PolicyOutputError(
+                f"policy.forward returned {type(output).__name__}, which is not an array; "
+                f"expected a torch.Tensor or numpy.ndarray of shape {a}, (K, {_dims(a)}) or "
+                f"(1, K, {_dims(a)})"
+            ) from exc
+        if arr.dtype == object or not (
+            np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
+        ):
+            raise PolicyOutputError(
+                f"policy.forward returned {type(output).__name__} with dtype {arr.dtype}; "
+                f"expected numeric actions of shape {a}, (K, {_dims(a)}) or (1, K, {_dims(a)})"
+            )
+        t = torch.from_numpy(np.ascontiguousarray(arr))
+    shape = tuple(t.shape)
+    if shape == a:
+        chunk = t.unsqueeze(0)
+    elif len(shape) == len(a) + 1 and shape[1:] == a:
+        chunk = t
+    elif len(shape) == len(a) + 2 and shape[0] == 1 and shape[2:] == a:
+        chunk = t[0]
+    else:
+        raise PolicyOutputError(
+            f"policy.forward returned an action of shape {shape}; expected one action of "
+            f"shape {a}, a chunk (K, {_dims(a)}) or a batched chunk (1, K, {_dims(a)})"
+        )
+    if chunk.shape[0] == 0:
+        raise PolicyOutputError(
+            f"policy.forward returned an empty action chunk (shape {shape}); expected K >= 1."
+        )
+    chunk = chunk.to(torch.float32)
+    return list(chunk.unbind(0))
+
+
+def _dims(a: tuple[int, ...]) -> str:
+    return ", ".join(str(d) for d in a)
+
+
+def run_episode(
+    env: Any, policy: Any, episode_seed: int, *, reset_policy_hook: bool = True
+) -> tuple[EpisodeResult, None]:
+    """Run one episode of ``env`` (already wrapped, ``num_envs=1``) with ``policy``.
+
+    Protocol (benchmark.md §6.2): reset with ``episode_seed``; a fresh FIFO action queue
+    per episode (leftover chunk actions never leak into the next episode); the policy is
+    queried whenever the queue is empty; at most ``env.max_episode_steps`` steps; success
+    is a latch over ``info["success"]``. Extension: global RNGs are seeded with the episode
+    seed and ``policy.reset()`` is called after the env reset (``reset_policy_hook``).
+    Returns ``(EpisodeResult, None)`` (the second item is reserved for video frames).
+    """
+    import torch
+
+    seed_global_rngs(episode_seed)
+    obs, _ = env.reset(seed=int(episode_seed))
+    max_steps = getattr(env, "max_episode_steps", None)
+    if max_steps is None:
+        raise RuntimeError(
+            "the env has no max_episode_steps attribute; wrap it with "
+            "apply_mikasa_vla_wrappers (or make_benchmark_env)"
+        )
+    if reset_policy_hook:
+        reset_policy(policy, episode_seed)
+    action_shape = tuple(env.action_space.shape)
+    device = getattr(env.unwrapped, "device", None) or torch.device("cpu")
+    queue: deque[Any] = deque()
+    success, total, n_steps = False, 0.0, 0
+    for _ in range(int(max_steps)):
+        if not queue:
+            queue.extend(normalize_action_chunk(policy.forward(obs), action_shape))
+        action = queue.popleft().to(device=device, dtype=torch.float32).unsqueeze(0)
+        obs, reward, terminated, truncated, info = env.step(action)
+        n_steps += 1
+        total += float(_first(reward))
+        if isinstance(info, dict) and "success" in info:
+            success = success or bool(_first(info["success"]))
+        if bool(_first(terminated)) or bool(_first(truncated)):
+            break
+    return EpisodeResult(bool(success), float(total), n_steps, int(episode_seed)), None
+
+
+def _state_chain(env: Any, env_id: str) -> Any:
+    """The non-canonical ``obs_mode="state"`` chain.
+
+    Same action path as the canonical chain (the task's curriculum wrapper), and the same
+    7-value ``proprio``; the images are replaced by the flat privileged ``state`` vector.
+    """
+    import gymnasium as gym
+    import torch
+    from gymnasium import spaces
+    from mani_skill.utils.gym_utils import find_max_episode_steps_value
+    from mikasa_wrappers import (
+        VLA_WRAPPER_CONFIGS,
+        ConvertJointsToEEFXyzRpyGripperWrapper,
+        FlattenRGBDObservationWrapper,
+        StateOnlyTensorToDictWrapper,
+    )
+
+    from .errors import UnknownTaskError
+
+    config = VLA_WRAPPER_CONFIGS.get(env_id)
+    if config is None:
+        raise UnknownTaskError(f"env id {env_id!r} has no canonical wrapper configuration")
+    max_steps = find_max_episode_steps_value(env)
+
+    class _ProprioFromAgent(gym.ObservationWrapper):
+        """Add ``proprio`` = [tcp_pose, qpos, qvel] (the rgb-mode layout) to the state obs."""
+
+        def __init__(self, inner: gym.Env) -> None:
+            super().__init__(inner)
+            n = int(getattr(inner.unwrapped, "num_envs", 1))
+            base = inner.unwrapped
+            dim = 7 + 2 * int(base.agent.robot.get_qpos().shape[-1])
+            entries = {"proprio": spaces.Box(-np.inf, np.inf, (n, dim), np.float32)}
+            entries.update(inner.observation_space.spaces)
+            self.observation_space = spaces.Dict(entries)
+
+        def observation(self, obs: dict) -> dict:
+            base = self.env.unwrapped
+            robot = base.agent.robot
+            proprio = torch.cat(
+                [base.agent.tcp.pose.raw_pose, robot.get_qpos(), robot.get_qvel()], dim=-1
+            ).to(torch.float32)
+            return {"proprio": proprio, **obs}
+
+    wrapped: Any = StateOnlyTensorToDictWrapper(env)
+    if config.curriculum_wrapper is not None:
+        wrapped = config.curriculum_wrapper(wrapped)
+    wrapped = FlattenRGBDObservationWrapper(
+        wrapped, rgb=False, depth=False, state=True, oracle=False, joints=False
+    )
+    wrapped = ConvertJointsToEEFXyzRpyGripperWrapper(_ProprioFromAgent(wrapped))
+    wrapped.max_episode_steps = int(max_steps) if max_steps is not None else None
+    return wrapped
+
+
+def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> Any:
+    """``gym.make`` with the protocol's arguments, then the canonical wrapper chain.
+
+    ``obs_mode="state"`` (non-canonical) uses `_state_chain` instead, which needs no
+    rendering at all.
+    """
+    import gymnasium as gym
+    import mikasa_envs  # noqa: F401  (registers the envs)
+
+    config = config or BenchmarkConfig()
+    rgb = config.obs_mode == OBS_MODE
+    env = gym.make(
+        env_id,
+        num_envs=NUM_ENVS,
+        obs_mode=config.obs_mode,
+        control_mode=config.control_mode,
+        render_mode="all" if rgb else None,
+        reward_mode=config.reward_mode,
+        sim_backend=config.sim_backend,
+    )
+    try:
+        if rgb:
+            from mikasa_wrappers import apply_mikasa_vla_wrappers
+
+            return apply_mikasa_vla_wrappers(env, include_overlays=config.include_overlays)
+        return _state_chain(env, env_id)
+    except BaseException:
+        env.close()
+        raise

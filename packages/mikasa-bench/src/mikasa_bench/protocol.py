@@ -1,0 +1,161 @@
+"""The canonical MIKASA-Robo-VLA evaluation protocol: constants and the run configuration.
+
+The names and values in this module are the published protocol (benchmark.md §1, §5);
+anything that deviates from them is recorded as a deviation in every result file.
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from typing import Any
+
+__all__ = [
+    "START_SEED",
+    "NUM_EPISODES_PER_TASK",
+    "OBS_MODE",
+    "CONTROL_MODE",
+    "REWARD_MODE",
+    "WRAPPER_CHAIN",
+    "SUPPORTED_SPLITS",
+    "SUPPORTED_OBS_MODES",
+    "NUM_ENVS",
+    "BenchmarkConfig",
+    "protocol_settings",
+    "package_versions",
+]
+
+START_SEED: int = 4242424242
+"""Seed of episode 0 of every task; episode i uses ``START_SEED + i``."""
+
+NUM_EPISODES_PER_TASK: int = 50
+"""Episodes per task (seeds 4242424242 ... 4242424291)."""
+
+OBS_MODE: str = "rgb"
+CONTROL_MODE: str = "pd_ee_delta_pose"
+REWARD_MODE: str = "normalized_dense"
+WRAPPER_CHAIN: str = "apply_mikasa_vla_wrappers(include_overlays=False)"
+"""Literal string recorded in every result file."""
+
+SUPPORTED_SPLITS: tuple[str, ...] = ("short", "medium", "long", "all")
+
+SUPPORTED_OBS_MODES: tuple[str, ...] = ("rgb", "state")
+"""``rgb`` is canonical; ``state`` is a fast, explicitly non-canonical override for testing."""
+
+NUM_ENVS: int = 1
+"""Each env instance simulates one episode at a time (canonical ``num_envs=1``)."""
+
+STATE_WRAPPER_CHAIN: str = (
+    "mikasa_bench state chain: StateOnlyTensorToDictWrapper -> curriculum wrapper -> "
+    "proprio(tcp_pose, qpos, qvel) + state -> ConvertJointsToEEFXyzRpyGripperWrapper"
+)
+"""Recorded instead of `WRAPPER_CHAIN` for the non-canonical ``obs_mode="state"`` override."""
+
+
+@dataclass(frozen=True)
+class BenchmarkConfig:
+    """Settings of one evaluation (benchmark.md §5); the defaults are the canonical protocol.
+
+    ``sim_backend`` defaults to ``"gpu"`` as upstream; the CLI's local executor passes
+    ``"cpu"`` because each of its workers simulates a single env on the CPU.
+    """
+
+    start_seed: int = START_SEED
+    n_episodes: int = NUM_EPISODES_PER_TASK
+    obs_mode: str = OBS_MODE
+    control_mode: str = CONTROL_MODE
+    reward_mode: str = REWARD_MODE
+    sim_backend: str = "gpu"
+    include_overlays: bool = False
+    save_videos: bool = False
+
+    def __post_init__(self) -> None:
+        if self.n_episodes <= 0:
+            raise ValueError(f"n_episodes must be > 0, got {self.n_episodes}")
+        if self.start_seed < 0:
+            raise ValueError(f"start_seed must be >= 0, got {self.start_seed}")
+        if self.obs_mode not in SUPPORTED_OBS_MODES:
+            raise ValueError(
+                f"unsupported obs_mode {self.obs_mode!r}; expected one of "
+                f"{', '.join(SUPPORTED_OBS_MODES)} ('rgb' is the canonical protocol)"
+            )
+        if self.save_videos:
+            raise NotImplementedError("video recording (save_videos=True) is not implemented yet")
+
+    def episode_seeds(self) -> list[int]:
+        """The seed of every episode, in episode order."""
+        return [self.start_seed + i for i in range(self.n_episodes)]
+
+    @property
+    def wrapper_chain(self) -> str:
+        """The wrapper chain string recorded in result files for this configuration."""
+        return WRAPPER_CHAIN if self.obs_mode == OBS_MODE else STATE_WRAPPER_CHAIN
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready field mapping (round-trips through ``BenchmarkConfig(**d)``)."""
+        return asdict(self)
+
+
+def deviations(config: BenchmarkConfig) -> list[str]:
+    """Human-readable list of the ways ``config`` departs from the canonical protocol."""
+    canonical = {
+        "start_seed": START_SEED,
+        "n_episodes": NUM_EPISODES_PER_TASK,
+        "obs_mode": OBS_MODE,
+        "control_mode": CONTROL_MODE,
+        "reward_mode": REWARD_MODE,
+        "include_overlays": False,
+    }
+    out = []
+    for key, value in canonical.items():
+        actual = getattr(config, key)
+        if actual != value:
+            out.append(f"{key}={actual!r} (canonical {value!r})")
+    return out
+
+
+def protocol_settings(config: BenchmarkConfig) -> dict[str, Any]:
+    """The protocol record written into every result file (settings + canonical flag)."""
+    devs = deviations(config)
+    return {
+        "start_seed": config.start_seed,
+        "n_episodes": config.n_episodes,
+        "episode_seeds": f"start_seed + i, i = 0 .. {config.n_episodes - 1}",
+        "obs_mode": config.obs_mode,
+        "control_mode": config.control_mode,
+        "reward_mode": config.reward_mode,
+        "wrapper_chain": config.wrapper_chain,
+        "include_overlays": config.include_overlays,
+        "num_envs": NUM_ENVS,
+        "sim_backend": config.sim_backend,
+        "policy_reset": "policy.reset() (if defined) at every episode start",
+        "policy_rng_seed": "python/numpy/torch global RNGs seeded with the episode seed",
+        "canonical": not devs,
+        "deviations": devs,
+    }
+
+
+_VERSIONED_PACKAGES = (
+    "mikasa-bench",
+    "mikasa-envs",
+    "mikasa-wrappers",
+    "mikasa-oracles",
+    "mani-skill",
+    "sapien",
+    "gymnasium",
+    "torch",
+    "numpy",
+)
+
+
+def package_versions() -> dict[str, str | None]:
+    """Installed versions of the packages that determine results (None if not installed)."""
+    out: dict[str, str | None] = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for name in _VERSIONED_PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out

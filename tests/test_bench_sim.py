@@ -1,0 +1,184 @@
+"""mikasa-bench end to end on the simulator, kept small (state mode, one short task,
+2 episodes): worker-count independence, resume of an interrupted run, a policy that
+returns the wrong shape mid-run.
+
+State mode is the explicitly non-canonical fast override; the env, seeds, action path
+and policies are the same as in rgb mode.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from mikasa_bench import cli
+from mikasa_bench.policies import resolve_policy
+from mikasa_bench.protocol import BenchmarkConfig
+from mikasa_bench.results import RunStore
+from mikasa_bench.tasks import resolve_tasks
+
+TASK = "RememberColor3-VLA-v0"
+COMMON = [
+    "--task",
+    TASK,
+    "--num-episodes",
+    "2",
+    "--obs-mode",
+    "state",
+    "--no-progress",
+    "--no-report",
+]
+PER_EPISODE = ("successes", "returns", "episode_lengths", "episode_seeds")
+
+
+def _task_json(run_dir: Path, env_id: str = TASK) -> dict:
+    return json.loads((run_dir / f"{env_id}.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory) -> Path:
+    """The oracle on one task with a single worker process."""
+    out = tmp_path_factory.mktemp("bench") / "w1"
+    assert (
+        cli.main(["run", *COMMON, "--policy", "oracle", "--workers", "1", "--out", str(out)]) == 0
+    )
+    return out
+
+
+def test_oracle_run_writes_spec_files(baseline):
+    r = _task_json(baseline)
+    assert r["episode_seeds"] == [4242424242, 4242424243]
+    assert r["successes"] == [True, True] and r["episode_lengths"] == [25, 25]
+    assert r["model"]["name"] == "oracle" and r["obs_mode"] == "state"
+    s = json.loads((baseline / "summary.json").read_text())
+    assert s["complete"] and s["per_task_sr"] == {TASK: 1.0}
+    assert s["protocol"]["canonical"] is False
+    assert "obs_mode='state' (canonical 'rgb')" in s["protocol"]["deviations"]
+    assert s["versions"]["mani-skill"] and s["wall_time_s"] > 0
+
+
+def test_workers_1_and_2_give_identical_episodes(baseline, tmp_path):
+    out = tmp_path / "w2"
+    assert (
+        cli.main(["run", *COMMON, "--policy", "oracle", "--workers", "2", "--out", str(out)]) == 0
+    )
+    a, b = _task_json(baseline), _task_json(out)
+    assert {k: a[k] for k in PER_EPISODE} == {k: b[k] for k in PER_EPISODE}
+
+
+def test_resume_after_interruption_loses_and_duplicates_nothing(baseline, tmp_path):
+    # Pre-write an interrupted run: episode 0 journaled (with a marker wall time),
+    # episode 1 torn mid-write by kill -9.
+    config = BenchmarkConfig(n_episodes=2, obs_mode="state", sim_backend="cpu")
+    selection = resolve_tasks(env_ids=[TASK])
+    store = RunStore.create(
+        tmp_path / "run",
+        tasks=selection.tasks,
+        policy=resolve_policy("oracle"),
+        config=config,
+        selection=selection.to_dict(),
+        commit=None,
+    )
+    done = _task_json(baseline)
+    rec = {
+        "env_id": TASK,
+        "episode": 0,
+        "seed": 4242424242,
+        "success_once": done["successes"][0],
+        "episode_return": done["returns"][0],
+        "n_steps": done["episode_lengths"][0],
+        "action_chunk_size": 1,
+        "wall_s": 999.0,
+    }
+    with open(store.journal_path, "a") as f:
+        f.write(json.dumps(rec) + "\n" + '{"env_id": "RememberColor3-VLA-v0", "epis')
+    assert (
+        cli.main(
+            [
+                "run",
+                "--resume",
+                str(store.run_dir),
+                "--workers",
+                "0",
+                "--no-progress",
+                "--no-report",
+            ]
+        )
+        == 0
+    )
+    lines = [json.loads(x) for x in store.journal_path.read_text().splitlines()]
+    assert [(x["episode"], x["wall_s"] == 999.0) for x in lines] == [(0, True), (1, False)]
+    r = _task_json(store.run_dir)
+    assert {k: r[k] for k in PER_EPISODE} == {k: done[k] for k in PER_EPISODE}
+    assert r["wall_time_s"] >= 999.0  # episode 0 came from the journal, it was not rerun
+    s_resumed = json.loads((store.run_dir / "summary.json").read_text())
+    s_base = json.loads((baseline / "summary.json").read_text())
+    for key in (
+        "split",
+        "sr_split",
+        "sr_per_memory_type",
+        "tasks",
+        "per_task_sr",
+        "per_task_mean_return",
+    ):
+        assert s_resumed[key] == s_base[key]
+    # Resuming a finished run runs nothing and changes no result.
+    assert (
+        cli.main(
+            [
+                "run",
+                "--resume",
+                str(store.run_dir),
+                "--workers",
+                "0",
+                "--no-progress",
+                "--no-report",
+            ]
+        )
+        == 0
+    )
+    assert _task_json(store.run_dir)["returns"] == r["returns"]
+
+
+def test_wrong_action_shape_stops_with_clear_error_and_keeps_results(tmp_path, capsys):
+    policy = tmp_path / "shape_policy.py"
+    policy.write_text(
+        "import numpy as np\n\n"
+        "class Policy:\n"
+        "    def __init__(self, env_id):\n"
+        "        self.bad = env_id.startswith('FindImposter')\n\n"
+        "    def forward(self, obs):\n"
+        "        return np.zeros(3 if self.bad else 7, np.float32)\n"
+    )
+    out = tmp_path / "run"
+    argv = [
+        "run",
+        "--task",
+        TASK,
+        "--task",
+        "FindImposterColor3-VLA-v0",
+        "--num-episodes",
+        "1",
+        "--obs-mode",
+        "state",
+        "--policy",
+        str(policy),
+        "--workers",
+        "0",
+        "--no-progress",
+        "--no-report",
+        "--out",
+        str(out),
+    ]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "FindImposterColor3-VLA-v0 episode 0 (seed 4242424242)" in err
+    assert "returned an action of shape (3,); expected one action of shape (7,)" in err
+    assert "--resume" in err
+    # The task finished before the failure is on disk, and the summary covers it.
+    assert _task_json(out)["successes"] == [False]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["tasks"] == [TASK] and summary["tasks_pending"] == ["FindImposterColor3-VLA-v0"]
+    shutil.rmtree(out)
