@@ -10,6 +10,7 @@ missing (slim ManiSkill wheels), a box of the D415's outer size stands in.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import tempfile
@@ -92,7 +93,9 @@ def light_panda_urdf() -> Path:
     Every other mesh path is made absolute so the copy can live outside the asset folder.
     """
     mesh = light_d415_mesh()
-    out = cache_dir() / f"panda_v3_light_v{CACHE_VERSION}.urdf"
+    # The copy holds absolute paths into this ManiSkill installation: key it by that path.
+    install = hashlib.sha1(str(PANDA_DIR).encode()).hexdigest()[:10]
+    out = cache_dir() / f"panda_v3_light_v{CACHE_VERSION}_{install}.urdf"
     if out.exists():
         return out
     text = (PANDA_DIR / "panda_v3.urdf").read_text()

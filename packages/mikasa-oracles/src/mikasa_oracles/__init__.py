@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from mikasa_oracles.rollout import Rollout, rollout
 from mikasa_oracles.selection import SelectionOracle
 
 __version__ = "0.1.0"
@@ -43,4 +44,4 @@ def make_oracle(env: gym.Env, **kwargs) -> SelectionOracle:
     return ORACLES[family](env, **kwargs)
 
 
-__all__ = ["ORACLES", "SelectionOracle", "has_oracle", "make_oracle", "__version__"]
+__all__ = ["ORACLES", "Rollout", "SelectionOracle", "has_oracle", "make_oracle", "rollout", "__version__"]

@@ -1,0 +1,151 @@
+"""Environment throughput: make/reset time and steps/s per env id, rgb and state.
+
+Each (env id, obs mode) is measured in a fresh subprocess so its peak memory (max RSS) is
+its own. rgb runs go through the canonical wrapper chain; state runs use the raw env (the
+chain needs camera images). A bare ManiSkill ``PickCube-v1`` with ``panda_wristcam`` and
+the same two 128x128 cameras is measured in the same run for comparison.
+
+    python benchmarks/env_throughput.py                      # every registered id
+    python benchmarks/env_throughput.py --env-ids RememberColor3-VLA-v0 --rgb-steps 30
+    python benchmarks/env_throughput.py --json results/env_throughput.json
+
+Reference (published implementation, this 2-core machine, CPU PhysX + lavapipe): median
+7.5 rgb steps/s and 265 state steps/s, reset 0.14 s, warm make 0.29 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BASELINE_ID = "PickCube-v1"
+REFERENCE = {"rgb_steps_per_s": 7.5, "state_steps_per_s": 265.0, "reset_s": 0.14, "warm_make_s": 0.29}
+
+
+def measure(env_id: str, obs_mode: str, steps: int) -> dict:
+    """Measure one env in this process (run inside the subprocess)."""
+    import resource
+
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401
+    import numpy as np
+
+    import mikasa_envs  # noqa: F401
+
+    kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sim_backend="cpu")
+    if env_id == BASELINE_ID:
+        kwargs.update(robot_uids="panda_wristcam", sensor_configs=dict(width=128, height=128))
+
+    def make():
+        env = gym.make(env_id, **kwargs)
+        if obs_mode == "rgb" and env_id != BASELINE_ID:
+            from mikasa_wrappers import apply_mikasa_vla_wrappers
+
+            env = apply_mikasa_vla_wrappers(env)
+        return env
+
+    t0 = time.perf_counter()
+    env = make()
+    cold_make = time.perf_counter() - t0
+    env.close()
+    t0 = time.perf_counter()
+    env = make()
+    warm_make = time.perf_counter() - t0
+    resets = []
+    for seed in range(3):
+        t0 = time.perf_counter()
+        env.reset(seed=seed)
+        resets.append(time.perf_counter() - t0)
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
+    env.step(action)  # first step warms caches
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        env.step(action)
+    steps_per_s = steps / (time.perf_counter() - t0)
+    env.close()
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return dict(
+        env_id=env_id,
+        obs_mode=obs_mode,
+        cold_make_s=cold_make,
+        warm_make_s=warm_make,
+        reset_s=statistics.median(resets),
+        steps_per_s=steps_per_s,
+        peak_rss_mb=peak_mb,
+    )
+
+
+def run_in_subprocess(env_id: str, obs_mode: str, steps: int) -> dict:
+    """Measure one (env, mode) in a fresh interpreter and return its figures."""
+    code = (
+        "import json, sys; sys.path.insert(0, %r); import env_throughput as m; "
+        "print('RESULT' + json.dumps(m.measure(%r, %r, %d)))"
+        % (str(Path(__file__).parent), env_id, obs_mode, steps)
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    line = next(line for line in out.splitlines() if line.startswith("RESULT"))
+    return json.loads(line[len("RESULT") :])
+
+
+def main() -> None:
+    """Parse arguments, measure, print a table and optionally write JSON."""
+    import mikasa_envs
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env-ids", default=None, help="comma-separated ids (default: every registered id)")
+    parser.add_argument("--rgb-steps", type=int, default=30)
+    parser.add_argument("--state-steps", type=int, default=300)
+    parser.add_argument("--json", default=None, help="write all figures to this JSON file")
+    args = parser.parse_args()
+    env_ids = args.env_ids.split(",") if args.env_ids else mikasa_envs.registered_env_ids()
+
+    rows = []
+    for env_id in [BASELINE_ID, *env_ids]:
+        rgb = run_in_subprocess(env_id, "rgb", args.rgb_steps)
+        state = run_in_subprocess(env_id, "state", args.state_steps)
+        rows.append((env_id, rgb, state))
+        print(
+            f"{env_id:42s} rgb {rgb['steps_per_s']:6.2f} st/s  state {state['steps_per_s']:6.1f} st/s  "
+            f"reset {rgb['reset_s']:.3f}/{state['reset_s']:.3f} s  warm make {rgb['warm_make_s']:.2f} s  "
+            f"peak rgb {rgb['peak_rss_mb']:.0f} MB",
+            flush=True,
+        )
+
+    tasks = rows[1:]
+    summary = dict(
+        median_rgb_steps_per_s=statistics.median(r["steps_per_s"] for _, r, _ in tasks),
+        median_state_steps_per_s=statistics.median(s["steps_per_s"] for _, _, s in tasks),
+        min_rgb_steps_per_s=min(r["steps_per_s"] for _, r, _ in tasks),
+        min_state_steps_per_s=min(s["steps_per_s"] for _, _, s in tasks),
+        median_reset_s=statistics.median(r["reset_s"] for _, r, _ in tasks),
+        median_warm_make_s=statistics.median(r["warm_make_s"] for _, r, _ in tasks),
+        max_peak_rgb_rss_mb=max(r["peak_rss_mb"] for _, r, _ in tasks),
+        baseline=dict(rgb=rows[0][1], state=rows[0][2]),
+        reference=REFERENCE,
+    )
+    print()
+    print(f"tasks measured: {len(tasks)}")
+    for key in ("rgb_steps_per_s", "state_steps_per_s"):
+        med = summary[f"median_{key}"]
+        low = summary[f"min_{key}"]
+        print(f"{key:18s} median {med:7.2f}  min {low:7.2f}  reference {REFERENCE[key]:6.1f}  "
+              f"ratio(min/ref) {low / REFERENCE[key]:.2f}x")
+    print(f"reset            median {summary['median_reset_s']:.3f} s (reference {REFERENCE['reset_s']})")
+    print(f"warm make        median {summary['median_warm_make_s']:.3f} s (reference {REFERENCE['warm_make_s']})")
+    print(f"peak memory, one rgb env process: max {summary['max_peak_rgb_rss_mb']:.0f} MB (target <= 1536)")
+    print(f"bare {BASELINE_ID}: rgb {rows[0][1]['steps_per_s']:.2f} st/s, state {rows[0][2]['steps_per_s']:.1f} st/s")
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(dict(rows=[dict(rgb=r, state=s) for _, r, s in rows], summary=summary), indent=2))
+        tmp.replace(path)
+
+
+if __name__ == "__main__":
+    main()
