@@ -115,3 +115,30 @@ def test_panda_without_wrist_camera(make_env):
     env = make_env("RememberColor3-VLA-v0", obs_mode="rgb", robot_uids="panda")
     obs, _ = env.reset(seed=0)
     assert list(obs["sensor_data"]) == ["base_camera"]
+
+
+@pytest.mark.parametrize(
+    "env_id",
+    [
+        "RememberColor3-VLA-v0",
+        "RememberShape5-VLA-v0",
+        "RememberShapeAndColor3x2-VLA-v0",
+        "FindImposterColor3-VLA-v0",
+        "FindImposterShape3-VLA-v0",
+        "FindImposterShapeAndColor3x2-VLA-v0",
+    ],
+)
+def test_overlays_render_for_each_family(make_env, env_id):
+    frames = []
+    for include_overlays in (False, True):
+        env = make_env(env_id, obs_mode="rgb", render_mode="rgb_array")
+        env = apply_mikasa_vla_wrappers(env, include_overlays=include_overlays)
+        env.reset(seed=0)
+        env.step(np.zeros(7, dtype=np.float32))
+        frame = env.render()
+        frames.append(np.asarray(frame.cpu() if isinstance(frame, torch.Tensor) else frame))
+    plain, overlaid = frames
+    assert overlaid.shape == plain.shape and overlaid.shape[-1] == 3
+    # Text and the target swatch are drawn in the top-left corner; the scene is unchanged elsewhere.
+    assert (overlaid[..., :100, :300, :] != plain[..., :100, :300, :]).mean() > 0.01
+    np.testing.assert_array_equal(overlaid[..., 300:, 300:, :], plain[..., 300:, 300:, :])

@@ -16,6 +16,7 @@ import cv2
 import gymnasium as gym
 import numpy as np
 import torch
+from mikasa_envs.building_blocks.shapes import SHAPE_NAMES
 
 from ._drawing import (
     BLACK,
@@ -62,18 +63,6 @@ __all__ = [
 DISABLE_REWARD_OVERLAY_ENV_VAR = "MIKASA_DISABLE_REWARD_OVERLAY"
 _TRUTHY = {"1", "true", "yes", "y", "on"}
 
-# Shape names by index as the RememberShape / FindImposterShape overlay spells them.
-SHAPE_NAMES = (
-    "cube",
-    "sphere",
-    "cylinder",
-    "cross",
-    "torus",
-    "star",
-    "pyramide",
-    "t_shape",
-    "crescent",
-)
 CUP_NAMES = {0: "Left", 1: "Center", 2: "Right"}
 # Fallback palettes, used only when the env exposes no colour table.
 _RGB_FALLBACK = {0: (255, 0, 0), 1: (0, 255, 0), 2: (0, 0, 255)}
