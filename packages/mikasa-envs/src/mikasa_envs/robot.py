@@ -10,6 +10,7 @@ missing (slim ManiSkill wheels), a box of the D415's outer size stands in.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
@@ -17,8 +18,14 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import sapien
+import torch
 from mani_skill import PACKAGE_ASSET_DIR
+from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController, PDEEPoseControllerConfig
 from mani_skill.agents.robots.panda.panda_wristcam import PandaWristCam
+from mani_skill.utils.structs import Pose
+from transforms3d.euler import euler2quat
+from transforms3d.quaternions import qmult
 
 D415_MESH = "realsense2_description/meshes/d415.stl"
 PANDA_DIR = Path(PACKAGE_ASSET_DIR) / "robots" / "panda"
@@ -109,9 +116,88 @@ def light_panda_urdf() -> Path:
     return out
 
 
+class FastPDEEPoseController(PDEEPoseController):
+    """ManiSkill's delta EE-pose controller with a numpy fast path for single-env CPU sims.
+
+    The reference computes the target pose with batched torch quaternion ops, which cost more
+    than the physics for one env. For the canonical configuration (normalised delta actions,
+    root translation with root-aligned rotation, no virtual target, no interpolation) this
+    does the same arithmetic on SAPIEN poses and calls the same pinocchio IK; every other
+    configuration, and GPU sims, go through ManiSkill's code unchanged.
+    """
+
+    def _fast_path(self) -> bool:
+        cfg = self.config
+        return (
+            not self.scene.gpu_sim_enabled
+            and self.scene.num_envs == 1
+            and cfg.use_delta
+            and not cfg.use_target
+            and not cfg.interpolate
+            and self._normalize_action
+            and cfg.frame == "root_translation:root_aligned_body_rotation"
+        )
+
+    def set_action(self, action) -> None:
+        if not self._fast_path():
+            return super().set_action(action)
+        a = action.detach().cpu().numpy().reshape(-1).astype(np.float64)
+        low, high = self.action_space_low[:3].cpu().numpy(), self.action_space_high[:3].cpu().numpy()
+        delta_pos = low + 0.5 * (np.clip(a[:3], -1.0, 1.0) + 1.0) * (high - low)
+        delta_rot = a[3:6]
+        norm = np.linalg.norm(delta_rot)
+        if norm > 1:  # rotation is clipped by norm, then scaled by rot_lower (as ManiSkill)
+            delta_rot = delta_rot / norm
+        delta_rot = delta_rot * self.config.rot_lower
+        ee_at_base = self.root_link._objs[0].entity_pose.inv() * self.ee_link._objs[0].entity_pose
+        # Intrinsic XYZ Euler angles, applied on the root-aligned side of the current rotation.
+        q = qmult(euler2quat(*delta_rot, axes="rxyz"), ee_at_base.q)
+        q = q if q[0] >= 0 else -q  # the sign ManiSkill's torch path standardises to
+        target = sapien.Pose(ee_at_base.p + delta_pos, q)
+        self._step = 0
+        self._target_pose = Pose.create_from_pq(
+            torch.tensor(target.p[None], dtype=torch.float32, device=self.device),
+            torch.tensor(target.q[None], dtype=torch.float32, device=self.device),
+        )
+        kin = self.kinematics
+        qpos = self.articulation._objs[0].qpos
+        result, success, _ = kin.pmodel.compute_inverse_kinematics(
+            kin.end_link_idx,
+            target,
+            initial_qpos=qpos[kin.pmodel_active_joint_indices.cpu().numpy()],
+            active_qmask=kin.qmask,
+            max_iterations=100,
+        )
+        if success:
+            targets = result[kin.pmodel_controlled_joint_indices.cpu().numpy()]
+        else:
+            targets = qpos[self.active_joint_indices.cpu().numpy()]
+        self._target_qpos = torch.tensor(targets[None], dtype=torch.float32, device=self.device)
+        for joint, value in zip(self.joints, targets):
+            joint._objs[0].set_drive_target(float(value))
+
+
+class FastPDEEPoseControllerConfig(PDEEPoseControllerConfig):
+    """``PDEEPoseControllerConfig`` that builds a ``FastPDEEPoseController``."""
+
+    controller_cls = FastPDEEPoseController
+
+
 class LightPandaWristCam(PandaWristCam):
-    """``panda_wristcam`` (same uid, joints, cameras and controllers) with the light housing mesh."""
+    """``panda_wristcam`` (same uid, joints, cameras and controllers) with the light housing
+    mesh and the fast delta EE-pose controller on CPU."""
 
     @property
     def urdf_path(self) -> str:  # type: ignore[override]
         return str(light_panda_urdf())
+
+    @property
+    def _controller_configs(self):
+        configs = super()._controller_configs
+        for combined in configs.values():
+            arm = combined.get("arm") if isinstance(combined, dict) else None
+            if type(arm) is PDEEPoseControllerConfig:
+                combined["arm"] = FastPDEEPoseControllerConfig(**{
+                    f.name: getattr(arm, f.name) for f in dataclasses.fields(arm)
+                })
+        return configs

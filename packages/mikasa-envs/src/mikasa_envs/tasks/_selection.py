@@ -29,6 +29,8 @@ from mikasa_envs.building_blocks.object_sets import ObjectSet, shape_color_objec
 from mikasa_envs.building_blocks.shapes import SHAPE_AND_COLOR_SHAPES, SHAPE_SCALE
 
 HIDDEN_Z = 1000.0
+# Which pinned layout a frame shows: the cue, everything hidden, the action layout; or free.
+LAYOUT_CUE, LAYOUT_HIDDEN, LAYOUT_ACTION, LAYOUT_FREE = 0, 1, 2, -1
 IDENTITY_QUAT = (1.0, 0.0, 0.0, 0.0)
 
 
@@ -162,8 +164,11 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         self.cue_poses = rest.repeat(b, 1, 1)
         self.action_poses = rest.repeat(b, 1, 1)
         self.cue_visible = torch.zeros(b, n, dtype=torch.bool, device=self.device)
+        # Per layout (LAYOUT_CUE / _HIDDEN / _ACTION) and env, the (N, 7) pinned poses.
+        self._layouts = rest.repeat(3, b, 1, 1)
         self.answer_index = torch.zeros(b, dtype=torch.long, device=self.device)
         self.manip_layout_applied = torch.zeros(b, dtype=torch.bool, device=self.device)
+        self._free_from_step: int | None = None
 
     def _load_objects(self) -> ObjectSet:
         """Build the N candidate objects (in key order)."""
@@ -200,44 +205,60 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         return poses
 
     # --------------------------------------------------------------- phases
-    def _phase_poses(self, t: torch.Tensor, first_substep: bool) -> tuple[torch.Tensor, torch.Tensor]:
-        """(envs to write (B,), poses (B, N, 7)) that produce frame ``t``."""
-        cue, empty, _ = self.phase_masks(t)
+    def _frame_layouts(self, env_idx: torch.Tensor) -> None:
+        """Precompute, per env, the poses of the three pinned layouts of this episode."""
+        hidden = self.cue_poses[env_idx].clone()
+        hidden[..., 2] = HIDDEN_Z
+        shown = self.cue_visible[env_idx, :, None]
+        self._layouts[LAYOUT_CUE, env_idx] = torch.where(shown, self.cue_poses[env_idx], hidden)
+        self._layouts[LAYOUT_HIDDEN, env_idx] = hidden
+        self._layouts[LAYOUT_ACTION, env_idx] = self.action_poses[env_idx]
+        # The CPU sim has one env: keep float64 numpy rows ready for the SAPIEN setters.
+        self._layouts_np = self._layouts[:, 0].cpu().numpy().astype(np.float64)
+
+    def _pinned_layout(self, t: torch.Tensor, first_substep: bool) -> torch.Tensor:
+        """Per env, which layout (LAYOUT_*) pins the objects for frame ``t``, or LAYOUT_FREE."""
         start = self.action_phase_start
         if self.APPEAR_SETTLE_STEPS > 0:
             settle = (t >= start) & (t < start + self.APPEAR_SETTLE_STEPS)
         else:
             settle = (t >= start) & ~self.manip_layout_applied & first_substep
-        hidden = self.cue_poses.clone()
-        hidden[..., 2] = HIDDEN_Z
-        shown_in_cue = cue[:, None] & self.cue_visible
-        poses = torch.where(shown_in_cue[..., None], self.cue_poses, hidden)
-        poses = torch.where(settle[:, None, None], self.action_poses, poses)
         self.manip_layout_applied |= settle
-        return cue | empty | settle, poses
+        layout = torch.where(t < self.cue_steps_per_env, LAYOUT_CUE, LAYOUT_HIDDEN)
+        layout = torch.where(settle, LAYOUT_ACTION, layout)
+        return torch.where((t < start) | settle, layout, LAYOUT_FREE)
 
-    def _write_object_poses(self, env_mask: torch.Tensor, poses: torch.Tensor) -> None:
-        """Teleport every object of the masked envs to ``poses`` with zero velocity."""
-        idx = torch.nonzero(env_mask).flatten()
-        if len(idx) == 0:
-            return
+    def _pin(self, t: torch.Tensor, first_substep: bool, env_mask: torch.Tensor | None = None) -> None:
+        """Teleport the objects of pinned envs to their layout for frame ``t``, zero velocity."""
+        if self._free_from_step is not None and int(t[0]) > self._free_from_step:
+            return  # CPU: the episode's objects are free from here on; skip the tensor logic
+        layout = self._pinned_layout(t, first_substep)
+        if env_mask is not None:
+            layout = torch.where(env_mask, layout, LAYOUT_FREE)
         if not self.gpu_sim_enabled:
             # CPU sim (one env): set the SAPIEN bodies directly; ManiSkill's batched setters
             # cost ~10x more per call and this runs twice per step in pinned phases.
-            rows = poses[0].cpu().numpy().astype(np.float64)
-            for actor, row in zip(self.task_objects, rows):
+            which = int(layout[0])
+            if which == LAYOUT_FREE:
+                self._free_from_step = int(t[0])
+                return
+            for actor, row in zip(self.task_objects, self._layouts_np[which]):
                 actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
                 body = actor._bodies[0]
                 body.linear_velocity = _ZERO3
                 body.angular_velocity = _ZERO3
             return
+        idx = torch.nonzero(layout != LAYOUT_FREE).flatten()
+        if len(idx) == 0:
+            return
+        poses = self._layouts[layout[idx], idx]
         # GPU: ManiSkill writes only the rows of envs flagged in the scene's reset mask.
         saved_mask = self.scene._reset_mask.clone()
         self.scene._reset_mask[:] = False
         self.scene._reset_mask[idx] = True
         zeros = torch.zeros(len(idx), 3, device=self.device)
         for k, actor in enumerate(self.task_objects):
-            actor.set_pose(Pose.create(poses[idx, k]))
+            actor.set_pose(Pose.create(poses[:, k]))
             actor.set_linear_velocity(zeros)
             actor.set_angular_velocity(zeros)
         self.scene._reset_mask[:] = saved_mask
@@ -245,23 +266,22 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         self.manip_layout_applied[env_idx] = False
+        self._free_from_step = None
+        self._frame_layouts(env_idx)
         mask = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         mask[env_idx] = True
-        write, poses = self._phase_poses(self.elapsed_steps, first_substep=True)
-        self._write_object_poses(mask & write, poses)
+        self._pin(self.elapsed_steps, first_substep=True, env_mask=mask)
 
     def _before_control_step(self) -> None:
         # Lay out the frame this step produces (elapsed_steps + 1; the counter is incremented
         # after physics) before the first substep, so the robot meets the new layout.
-        write, poses = self._phase_poses(self.elapsed_steps + 1, first_substep=True)
-        self._write_object_poses(write, poses)
+        self._pin(self.elapsed_steps + 1, first_substep=True)
 
     def _after_control_step(self) -> None:
         # Pin again after the last substep: pinned objects show exactly at their phase poses,
         # undoing any push by the robot, the fall of hidden objects parked at z = 1000 and
         # collisions between them.
-        write, poses = self._phase_poses(self.elapsed_steps + 1, first_substep=False)
-        self._write_object_poses(write, poses)
+        self._pin(self.elapsed_steps + 1, first_substep=False)
 
     # --------------------------------------------------------------- queries
     def object_positions(self) -> torch.Tensor:
@@ -273,6 +293,9 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
 
     def target_position(self) -> torch.Tensor:
         """(B, 3) current origin of the answer object."""
+        if not self.gpu_sim_enabled:
+            actor = self.task_objects[int(self.answer_index[0])]
+            return torch.from_numpy(np.asarray(actor._objs[0].pose.p, dtype=np.float32))[None].to(self.device)
         positions = self.object_positions()
         return positions[torch.arange(self.num_envs, device=self.device), self.answer_index]
 
@@ -293,10 +316,12 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         obs = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
         if self.obs_mode in ("state", "state_dict"):
             obs["oracle_info"] = self.oracle_info
-            positions = self.object_positions()
+            # Only the answer's position is non-zero; evaluate() already located it.
+            target = info["obj_to_goal_pos"] + self.agent.tcp.pose.p
             is_target = torch.arange(self.num_objects, device=self.device) == self.answer_index[:, None]
-            for k in range(self.num_objects):
-                obs[f"goal_{k}_pose"] = positions[:, k] * is_target[:, k, None]
+            goals = (target[:, None, :] * is_target[..., None]).unbind(1)
+            for k, goal in enumerate(goals):
+                obs[f"goal_{k}_pose"] = goal
         return obs
 
     # ---------------------------------------------------------------- reward
