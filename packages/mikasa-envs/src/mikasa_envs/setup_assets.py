@@ -10,8 +10,9 @@ from mikasa_envs.robot import light_panda_urdf
 
 
 def main() -> None:
-    """Create the light wrist-camera robot description in the cache and print its path."""
-    print(f"light panda_wristcam description: {light_panda_urdf()}")
+    """Create both light robot descriptions in the cache and print their paths."""
+    for light_links in (False, True):
+        print(f"light panda_wristcam description (light links: {light_links}): {light_panda_urdf(light_links)}")
 
 
 if __name__ == "__main__":

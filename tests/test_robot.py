@@ -1,0 +1,54 @@
+"""The light robot description and the fast controller path agree with ManiSkill's."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import torch
+from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
+
+from mikasa_envs import robot
+
+
+def test_cluster_decimate_merges_cells_and_drops_degenerate_faces():
+    # Two triangles sharing an edge, plus a sliver whose vertices fall in one cell.
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.001, 0.001, 0], [0.002, 0, 0]], float)
+    faces = np.array([[0, 1, 2], [1, 3, 2], [0, 4, 5]])
+    v, f, n = robot.cluster_decimate(vertices, faces, cell=0.01)
+    assert n is None
+    assert len(v) == 4 and len(f) == 2
+    triangles = {frozenset(map(tuple, np.round(v[face]).astype(int).tolist())) for face in f}
+    assert triangles == {
+        frozenset({(0, 0, 0), (1, 0, 0), (0, 1, 0)}),
+        frozenset({(1, 0, 0), (1, 1, 0), (0, 1, 0)}),
+    }
+
+
+def test_light_urdf_swaps_only_visual_meshes(tmp_path, monkeypatch):
+    monkeypatch.setenv("MIKASA_CACHE_DIR", str(tmp_path))
+    original = (robot.PANDA_DIR / "panda_v3.urdf").read_text()
+    for light_links in (False, True):
+        text = robot.light_panda_urdf(light_links).read_text()
+        files = re.findall(r'filename="([^"]+)"', text)
+        assert len(files) == len(re.findall(r'filename="([^"]+)"', original))
+        swapped = [f for f in files if str(tmp_path) in f]
+        assert any("d415" in f for f in swapped)
+        assert all("collision" not in f for f in swapped)
+        assert any("link3" in f for f in swapped) == light_links
+
+
+def test_fast_controller_matches_maniskill(make_env):
+    env = make_env("RememberColor3-VLA-v0")
+    env.reset(seed=0)
+    base = env.unwrapped
+    arm = base.agent.controller.controllers["arm"]
+    assert isinstance(arm, robot.FastPDEEPoseController) and arm._fast_path()
+    rng = np.random.default_rng(0)
+    for _ in range(15):
+        action = rng.uniform(-1.5, 1.5, 7).astype(np.float32)
+        base.agent.set_action(torch.from_numpy(action[None]))
+        fast = arm._target_qpos.clone()
+        PDEEPoseController.set_action(arm, torch.from_numpy(action[None, :6]))
+        torch.testing.assert_close(fast, arm._target_qpos, atol=1e-5, rtol=0)
+        env.step(action)
