@@ -35,9 +35,8 @@ def measure(env_id: str, obs_mode: str, steps: int) -> dict:
 
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401
-    import numpy as np
-
     import mikasa_envs  # noqa: F401
+    import numpy as np
 
     kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sim_backend="cpu")
     if env_id == BASELINE_ID:
@@ -89,10 +88,10 @@ def measure(env_id: str, obs_mode: str, steps: int) -> dict:
 
 def run_in_subprocess(env_id: str, obs_mode: str, steps: int) -> dict:
     """Measure one (env, mode) in a fresh interpreter and return its figures."""
+    here = str(Path(__file__).parent)
     code = (
-        "import json, sys; sys.path.insert(0, %r); import env_throughput as m; "
-        "print('RESULT' + json.dumps(m.measure(%r, %r, %d)))"
-        % (str(Path(__file__).parent), env_id, obs_mode, steps)
+        f"import json, sys; sys.path.insert(0, {here!r}); import env_throughput as m; "
+        f"print('RESULT' + json.dumps(m.measure({env_id!r}, {obs_mode!r}, {steps})))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     line = next(line for line in out.splitlines() if line.startswith("RESULT"))

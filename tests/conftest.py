@@ -8,10 +8,9 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import gymnasium as gym  # noqa: E402
+import mikasa_envs  # noqa: E402
 import pytest  # noqa: E402
 import torch  # noqa: E402
-
-import mikasa_envs  # noqa: E402
 
 torch.set_num_threads(1)
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 from conftest import REGISTERED_IDS
-
 from mikasa_envs import get_task
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_wrappers import apply_mikasa_vla_wrappers
@@ -83,7 +82,7 @@ def test_truncates_at_manifest_horizon(make_env):
 def test_max_episode_steps_override(make_env):
     env = make_env("RememberShape3-VLA-v0", max_episode_steps=5)
     env.reset(seed=0)
-    for step in range(1, 6):
+    for _ in range(5):
         *_, truncated, _ = env.step(None)
     assert bool(truncated[0])
 

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import gymnasium as gym
+import mikasa_envs
 import numpy as np
 import pytest
 import torch
-
-import mikasa_envs
 
 
 @pytest.mark.parametrize(

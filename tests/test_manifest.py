@@ -8,7 +8,6 @@ import gymnasium as gym
 import pytest
 from conftest import REGISTERED_IDS
 from mani_skill.utils.registration import REGISTERED_ENVS
-
 from mikasa_envs import manifest
 
 

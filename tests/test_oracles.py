@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import LONG_IDS, REGISTERED_IDS, SHORT_IDS
-
 from mikasa_oracles import make_oracle, rollout
 from mikasa_wrappers import apply_mikasa_vla_wrappers
 

@@ -7,7 +7,6 @@ import re
 import numpy as np
 import torch
 from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
-
 from mikasa_envs import robot
 
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 from conftest import REGISTERED_IDS
-
 from mikasa_envs.tasks._selection import HIDDEN_Z
 
 ZERO = np.zeros(7, dtype=np.float32)
@@ -125,7 +124,7 @@ def test_same_seed_same_episode(make_env, env_id):
             obs, reward, *_ = env.step(a)
             trace += [obs.clone(), reward.clone()]
         runs.append(trace)
-    for a, b in zip(*runs):
+    for a, b in zip(*runs, strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
 
 

@@ -214,7 +214,7 @@ class FastPDEEPoseController(PDEEPoseController):
         else:
             targets = qpos[self.active_joint_indices.cpu().numpy()]
         self._target_qpos = torch.tensor(targets[None], dtype=torch.float32, device=self.device)
-        for joint, value in zip(self.joints, targets):
+        for joint, value in zip(self.joints, targets, strict=True):
             joint._objs[0].set_drive_target(float(value))
 
 

@@ -242,7 +242,7 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
             if which == LAYOUT_FREE:
                 self._free_from_step = int(t[0])
                 return
-            for actor, row in zip(self.task_objects, self._layouts_np[which]):
+            for actor, row in zip(self.task_objects, self._layouts_np[which], strict=True):
                 actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
                 body = actor._bodies[0]
                 body.linear_velocity = _ZERO3

@@ -5,7 +5,11 @@ from __future__ import annotations
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
 from mikasa_envs.building_blocks.object_sets import palette_cubes
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, jitter_sequential, line_or_arc_slots
+from mikasa_envs.tasks._selection import (
+    FindImposterVLABaseEnv,
+    jitter_sequential,
+    line_or_arc_slots,
+)
 
 
 class FindImposterColorVLABaseEnv(FindImposterVLABaseEnv):

@@ -5,7 +5,11 @@ from __future__ import annotations
 from mikasa_envs.building_blocks.object_sets import blue_shapes
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, jitter_sequential, line_or_arc_slots
+from mikasa_envs.tasks._selection import (
+    FindImposterVLABaseEnv,
+    jitter_sequential,
+    line_or_arc_slots,
+)
 
 
 class FindImposterShapeVLABaseEnv(FindImposterVLABaseEnv):
