@@ -24,8 +24,13 @@ import torch
 from mani_skill.utils.structs import Actor, Pose
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
-from mikasa_envs.building_blocks.cubes import COLOR_PALETTE_RGB, rgba01
-from mikasa_envs.building_blocks.object_sets import ObjectSet, shape_color_objects
+from mikasa_envs.building_blocks.cubes import COLOR_PALETTE_RGB, CUBE_HALF_SIZE, rgba01
+from mikasa_envs.building_blocks.object_sets import (
+    ObjectSet,
+    blue_shapes,
+    palette_cubes,
+    shape_color_objects,
+)
 from mikasa_envs.building_blocks.shapes import SHAPE_AND_COLOR_SHAPES, SHAPE_SCALE
 
 HIDDEN_Z = 1000.0
@@ -131,10 +136,10 @@ def non_identity_permutation(n: int) -> torch.Tensor:
 class SelectionVLABaseEnv(MikasaVLABaseEnv):
     """Base of the selection families: N objects, one answer, cue → delay → choose.
 
-    Subclasses return their ``ObjectSet`` from ``_load_objects`` and, in ``_sample_episode``,
-    draw the answer (``_set_answer``) and the layout (``_set_remember_layout`` or
-    ``_set_imposter_layout``), which fill ``cue_poses`` / ``action_poses`` ((B, N, 7) raw
-    poses) and ``cue_visible`` ((B, N)) for the reset envs.
+    Subclasses return their ``ObjectSet`` from ``_load_objects`` and may override
+    ``_base_slots`` and ``JITTER``; the Remember / FindImposter protocols turn the shuffled
+    slots into ``cue_poses`` / ``action_poses`` ((B, N, 7) raw poses) and ``cue_visible``
+    ((B, N)) in ``_set_layout``.
     """
 
     GOAL_THRESH: ClassVar[float] = 0.05
@@ -143,6 +148,8 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
     ACTION_L2_COEF: ClassVar[float] = 0.02
     ACTION_DELTA_L2_COEF: ClassVar[float] = 0.05
     QVEL_L2_COEF: ClassVar[float] = 0.01
+    # How the base slots are jittered (jitter_sequential or jitter_best_of).
+    JITTER: ClassVar[Callable[[torch.Tensor], torch.Tensor]] = staticmethod(jitter_sequential)
     # Steps (from the first action-phase frame) during which the action layout is re-imposed
     # before every substep; 0 = written once, at the first substep of the first action step.
     APPEAR_SETTLE_STEPS: ClassVar[int] = 1
@@ -203,6 +210,21 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
             xy = jitter(slots_t)
             poses[row, :, :2] = xy[torch.randperm(self.num_objects)]
         return poses
+
+    def _base_slots(self) -> np.ndarray:
+        """(N, 2) unjittered xy slots: a line for N = 3, else the colour tasks' arc."""
+        return line_or_arc_slots(self.num_objects)
+
+    def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
+        # Upstream's draw order: the answer (numpy), then per env the jitter and the slot
+        # permutation (torch), then the protocol's own draws (FindImposter's permutation).
+        self._sample_answer(env_idx)
+        poses = self._shuffled_slot_layout(len(env_idx), self._base_slots(), type(self).JITTER)
+        self._set_layout(env_idx, poses)
+
+    def _set_layout(self, env_idx: torch.Tensor, poses: torch.Tensor) -> None:
+        """Turn the reset envs' shuffled slot poses into cue and action layouts."""
+        raise NotImplementedError
 
     # --------------------------------------------------------------- phases
     def _frame_layouts(self, env_idx: torch.Tensor) -> None:
@@ -364,7 +386,7 @@ class RememberVLABaseEnv(SelectionVLABaseEnv):
     # Upstream spreads the layout apart (after the phase draws) only when N = 3.
     SPREAD_WHEN_THREE: ClassVar[bool] = False
 
-    def _set_remember_layout(self, env_idx: torch.Tensor, action_poses: torch.Tensor) -> None:
+    def _set_layout(self, env_idx: torch.Tensor, action_poses: torch.Tensor) -> None:
         """Record the action-phase poses; the cue shows the answer alone at the cue spot."""
         answer = self.answer_index[env_idx]
         self.action_poses[env_idx] = action_poses
@@ -398,7 +420,7 @@ class FindImposterVLABaseEnv(SelectionVLABaseEnv):
     # Written once at the first substep of the first action step, then free (upstream).
     APPEAR_SETTLE_STEPS = 0
 
-    def _set_imposter_layout(self, env_idx: torch.Tensor, cue_poses: torch.Tensor) -> None:
+    def _set_layout(self, env_idx: torch.Tensor, cue_poses: torch.Tensor) -> None:
         """Record cue poses; action poses permute the cue slots (never the identity)."""
         imposter = self.answer_index[env_idx]
         self.cue_poses[env_idx] = cue_poses
@@ -426,6 +448,33 @@ class FindImposterVLABaseEnv(SelectionVLABaseEnv):
         return {k: self.action_poses[:, k] for k in range(self.num_objects)}
 
 
+class ColorCubesMixin:
+    """Objects of the two colour families: N cubes in the first N palette colours."""
+
+    COLORS: ClassVar[int] = 3
+    CUBE_HALFSIZE: ClassVar[float] = CUBE_HALF_SIZE
+
+    def _load_objects(self) -> ObjectSet:
+        objects = palette_cubes(self.scene, self.COLORS)
+        self.color_dict = objects.descriptions
+        self.cubes = dict(enumerate(objects.actors))
+        return objects
+
+
+class BlueShapesMixin:
+    """Objects of the two shape families: the first N task shapes, all blue."""
+
+    SHAPES: ClassVar[int] = 3
+    SHAPE_SCALE: ClassVar[float] = SHAPE_SCALE
+
+    def _load_objects(self) -> ObjectSet:
+        objects = blue_shapes(self.scene, self.SHAPES)
+        self.shape_dict = objects.descriptions
+        self.shape_actors = dict(enumerate(objects.actors))
+        self.shape_resting_z = {k: float(objects.rest_poses[k, 2]) for k in self.shape_dict}
+        return objects
+
+
 class ShapeAndColorMixin:
     """Answer encoding and vocabularies shared by the two ShapeAndColor families.
 
@@ -440,6 +489,7 @@ class ShapeAndColorMixin:
     ACTION_DELTA_L2_COEF = 0.0
     QVEL_L2_COEF = 0.0
     SHAPES: ClassVar[int] = 6
+    JITTER = staticmethod(jitter_best_of)
 
     def _load_objects(self) -> ObjectSet:
         objects = shape_color_objects(self.scene, self.SHAPES)

@@ -2,17 +2,11 @@
 
 from __future__ import annotations
 
-from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
-from mikasa_envs.building_blocks.object_sets import palette_cubes
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import (
-    FindImposterVLABaseEnv,
-    jitter_sequential,
-    line_or_arc_slots,
-)
+from mikasa_envs.tasks._selection import ColorCubesMixin, FindImposterVLABaseEnv
 
 
-class FindImposterColorVLABaseEnv(FindImposterVLABaseEnv):
+class FindImposterColorVLABaseEnv(ColorCubesMixin, FindImposterVLABaseEnv):
     """**Task Description:** N−1 of N differently coloured cubes are shown at their slots;
     then nothing is visible for a delay; then all N cubes reappear with their slots
     permuted. Bring the TCP to the cube whose colour was not shown and hold still.
@@ -28,19 +22,6 @@ class FindImposterColorVLABaseEnv(FindImposterVLABaseEnv):
     LANGUAGE_INSTRUCTION = (
         "Observe the cubes shown, wait, then touch the cube whose color was not present before."
     )
-    COLORS: int = 3
-    CUBE_HALFSIZE = CUBE_HALF_SIZE
-
-    def _load_objects(self):
-        objects = palette_cubes(self.scene, self.COLORS)
-        self.color_dict = objects.descriptions
-        self.cubes = dict(enumerate(objects.actors))
-        return objects
-
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
-        slots = line_or_arc_slots(self.COLORS)
-        self._set_imposter_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
 
 
 @register_task("FindImposterColor3-VLA-v0")

@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-from mikasa_envs.building_blocks.object_sets import blue_shapes
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import (
-    FindImposterVLABaseEnv,
-    jitter_sequential,
-    line_or_arc_slots,
-)
+from mikasa_envs.tasks._selection import BlueShapesMixin, FindImposterVLABaseEnv
 
 
-class FindImposterShapeVLABaseEnv(FindImposterVLABaseEnv):
+class FindImposterShapeVLABaseEnv(BlueShapesMixin, FindImposterVLABaseEnv):
     """**Task Description:** N−1 of N blue objects of different shapes are shown at their
     slots; then nothing is visible for a delay; then all N reappear with their slots
     permuted. Bring the TCP to the object whose shape was not shown and hold still.
@@ -28,22 +23,9 @@ class FindImposterShapeVLABaseEnv(FindImposterVLABaseEnv):
     LANGUAGE_INSTRUCTION = (
         "Observe the shapes shown, wait, then touch the object whose shape was not present before."
     )
-    SHAPES: int = 3
-    SHAPE_SCALE = SHAPE_SCALE
     # Upstream places every shape's origin at z = 0.02: flat shapes hover during the cue and
     # drop when released (appearance only, kept).
     FIXED_OBJECT_Z = SHAPE_SCALE
-
-    def _load_objects(self):
-        objects = blue_shapes(self.scene, self.SHAPES)
-        self.shape_dict = objects.descriptions
-        self.shape_actors = dict(enumerate(objects.actors))
-        return objects
-
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
-        slots = line_or_arc_slots(self.SHAPES)
-        self._set_imposter_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
 
 
 @register_task("FindImposterShape3-VLA-v0")

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import (
-    FindImposterVLABaseEnv,
-    ShapeAndColorMixin,
-    arc_slots,
-    jitter_best_of,
-)
+from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, ShapeAndColorMixin, arc_slots
 
 
 class FindImposterShapeAndColorVLABaseEnv(ShapeAndColorMixin, FindImposterVLABaseEnv):
@@ -33,13 +28,11 @@ class FindImposterShapeAndColorVLABaseEnv(ShapeAndColorMixin, FindImposterVLABas
     # Every object's origin at z = 0.02 as upstream (flat shapes hover during the cue).
     FIXED_OBJECT_Z = SHAPE_SCALE
 
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
+    def _base_slots(self):
         n = self.SHAPES
         radius = 0.3 if n <= 9 else 0.45
         y_shift = 0.025 if (n % 2 == 1 and n > 3) else 0.0
-        slots = arc_slots(n, radius=radius, even_offset=True, y_shift=y_shift)
-        self._set_imposter_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_best_of))
+        return arc_slots(n, radius=radius, even_offset=True, y_shift=y_shift)
 
 
 @register_task("FindImposterShapeAndColor3x2-VLA-v0")

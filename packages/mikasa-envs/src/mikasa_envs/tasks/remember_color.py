@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
-from mikasa_envs.building_blocks.object_sets import palette_cubes
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import RememberVLABaseEnv, jitter_sequential, line_or_arc_slots
+from mikasa_envs.tasks._selection import ColorCubesMixin, RememberVLABaseEnv
 
 
-class RememberColorVLABaseEnv(RememberVLABaseEnv):
+class RememberColorVLABaseEnv(ColorCubesMixin, RememberVLABaseEnv):
     """**Task Description:** one cube is shown at the centre of the table; then nothing is
     visible for a delay; then all N differently coloured cubes appear at new places. Bring
     the TCP to the cube of the remembered colour and hold still.
@@ -22,20 +20,7 @@ class RememberColorVLABaseEnv(RememberVLABaseEnv):
     """
 
     LANGUAGE_INSTRUCTION = "Observe the cube's color, wait, then touch the cube of the same color."
-    COLORS: int = 3
-    CUBE_HALFSIZE = CUBE_HALF_SIZE
     SPREAD_WHEN_THREE = True
-
-    def _load_objects(self):
-        objects = palette_cubes(self.scene, self.COLORS)
-        self.color_dict = objects.descriptions
-        self.cubes = dict(enumerate(objects.actors))
-        return objects
-
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
-        slots = line_or_arc_slots(self.COLORS)
-        self._set_remember_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
 
     @property
     def true_color_indices(self):

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from mikasa_envs.building_blocks.object_sets import blue_shapes
-from mikasa_envs.building_blocks.shapes import SHAPE_REST_Z, SHAPE_SCALE
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import RememberVLABaseEnv, jitter_sequential, line_or_arc_slots
+from mikasa_envs.tasks._selection import BlueShapesMixin, RememberVLABaseEnv
 
 
-class RememberShapeVLABaseEnv(RememberVLABaseEnv):
+class RememberShapeVLABaseEnv(BlueShapesMixin, RememberVLABaseEnv):
     """**Task Description:** one blue object is shown at the centre of the table; then
     nothing is visible for a delay; then all N blue objects of different shapes appear at
     new places. Bring the TCP to the object of the remembered shape and hold still.
@@ -22,23 +20,9 @@ class RememberShapeVLABaseEnv(RememberVLABaseEnv):
     """
 
     LANGUAGE_INSTRUCTION = "Observe the object's shape, wait, then touch the object of the same shape."
-    SHAPES: int = 3
-    SHAPE_SCALE = SHAPE_SCALE
     # Objects teleported onto the table are held in place for 3 frames (upstream).
     APPEAR_SETTLE_STEPS = 3
     SPREAD_WHEN_THREE = True
-
-    def _load_objects(self):
-        objects = blue_shapes(self.scene, self.SHAPES)
-        self.shape_dict = objects.descriptions
-        self.shape_actors = dict(enumerate(objects.actors))
-        self.shape_resting_z = {k: SHAPE_REST_Z[name] for k, name in self.shape_dict.items()}
-        return objects
-
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
-        slots = line_or_arc_slots(self.SHAPES)
-        self._set_remember_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_sequential))
 
     @property
     def true_shape_indices(self):

@@ -3,12 +3,7 @@
 from __future__ import annotations
 
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import (
-    RememberVLABaseEnv,
-    ShapeAndColorMixin,
-    arc_slots,
-    jitter_best_of,
-)
+from mikasa_envs.tasks._selection import RememberVLABaseEnv, ShapeAndColorMixin, arc_slots
 
 
 class RememberShapeAndColorVLABaseEnv(ShapeAndColorMixin, RememberVLABaseEnv):
@@ -30,12 +25,10 @@ class RememberShapeAndColorVLABaseEnv(ShapeAndColorMixin, RememberVLABaseEnv):
     )
     APPEAR_SETTLE_STEPS = 3
 
-    def _sample_episode(self, env_idx, options):
-        self._sample_answer(env_idx)
+    def _base_slots(self):
         # Upstream shifts y only for N in {5, 9}: of 6, 9, 15 objects only N = 9.
         y_shift = 0.025 if self.SHAPES in (5, 9) else 0.0
-        slots = arc_slots(self.SHAPES, radius=0.3, even_offset=True, y_shift=y_shift)
-        self._set_remember_layout(env_idx, self._shuffled_slot_layout(len(env_idx), slots, jitter_best_of))
+        return arc_slots(self.SHAPES, radius=0.3, even_offset=True, y_shift=y_shift)
 
 
 @register_task("RememberShapeAndColor3x2-VLA-v0")
