@@ -141,3 +141,17 @@ def test_overlays_render_for_each_family(make_env, env_id):
     # Text and the target swatch are drawn in the top-left corner; the scene is unchanged elsewhere.
     assert (overlaid[..., :100, :300, :] != plain[..., :100, :300, :]).mean() > 0.01
     np.testing.assert_array_equal(overlaid[..., 300:, 300:, :], plain[..., 300:, 300:, :])
+
+
+def test_gymnasium_module_entry_point_registers_without_import():
+    """``gym.make("mikasa_envs:<id>")`` imports the package and finds the env."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gymnasium as gym; "
+        "env = gym.make('mikasa_envs:RememberColor3-VLA-v0', obs_mode='state'); "
+        "print(type(env.unwrapped).__name__)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().endswith("RememberColor3VLAEnv")
