@@ -1,0 +1,796 @@
+"""``mikasa-collect``: demonstration datasets from the scripted oracles (datasets spec §2-§5).
+
+Rolls out a task's oracle through the canonical VLA wrapper chain (``obs_mode="rgb"``,
+``pd_ee_delta_pose``, ``normalized_dense``, CPU simulation), keeps the successful
+episodes and writes them as NPZ files through :mod:`mikasa_datasets.npz`::
+
+    <out>/data_npz/<dataset_name>/train_data_<i>.npz   i = 0..N-1
+    <out>/data_npz/<dataset_name>/metadata.json
+
+Seeds and determinism
+    Attempt ``k`` resets the env with seed ``start_seed + k`` (default start seed 0, as
+    the upstream PPO collector: training seeds stay far below the benchmark's
+    4242424242+). Failed attempts are skipped, so episode ``i`` is the ``i``-th successful
+    attempt in seed order. An episode depends only on its seed (the env is reseeded, the
+    oracle reset and the global RNGs seeded per attempt), so the same command writes
+    byte-identical files, and any number of workers writes the same files as one.
+
+Parallelism
+    ``--workers W`` (W >= 2) starts W spawn-started processes (SAPIEN is not fork-safe),
+    each with one env. Seeds are handed out in order; a finished successful attempt is
+    staged in ``data_npz/_batched/<dataset_name>/seed_<s>.npz`` and renamed to its final
+    ``train_data_<i>.npz`` only once every smaller seed has finished, so indices follow
+    seed order whatever the completion order. No more attempts are in flight than
+    episodes still missing, so none is wasted at the end. ``W == 1`` runs in-process.
+
+Resume
+    Final files appear by atomic rename only, and ``metadata.json`` is rewritten after
+    every new episode. Re-running the same command keeps ``train_data_0..n-1`` (checked),
+    continues at the seed after the last kept episode and removes stale temporary and
+    staged files. One collector per task directory at a time (an advisory lock).
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import logging
+import multiprocessing as mp
+import os
+import queue
+import random
+import signal
+import sys
+import time
+import traceback
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "AttemptResult",
+    "CollectError",
+    "CollectionFailed",
+    "CollectionSummary",
+    "DEFAULT_MIN_EPISODE_LENGTH",
+    "DEFAULT_NUM_EPISODES",
+    "DEFAULT_OUT",
+    "DEFAULT_START_SEED",
+    "collect",
+    "default_max_attempts",
+    "main",
+    "resolve_task",
+]
+
+DEFAULT_NUM_EPISODES = 250
+"""Episodes per task in the released data (spec §4)."""
+DEFAULT_OUT = "data_mikasa_robo"
+"""Dataset root (spec §2)."""
+DEFAULT_START_SEED = 0
+"""Seed of attempt 0, as the upstream PPO collector (spec §5.1.3)."""
+DEFAULT_MIN_EPISODE_LENGTH = 10
+"""Successes shorter than this are discarded (upstream ``MIN_EPISODE_LENGTH_TO_SAVE``)."""
+MAX_SEED = 2**32 - 1
+"""ManiSkill seeds its episode RNG with ``numpy.random.RandomState``: seeds < 2**32."""
+
+CONTROL_MODE = "pd_ee_delta_pose"
+REWARD_MODE = "normalized_dense"
+SIM_BACKEND = "cpu"
+STAGED_PREFIX = "seed_"
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+_TRUTHY = {"1", "true", "yes", "y", "on"}
+
+
+class CollectError(ValueError):
+    """Bad input (unknown task, no oracle, bad counts, inconsistent existing data): exit 2."""
+
+
+class CollectionFailed(RuntimeError):
+    """The collection could not finish (attempt budget spent, a worker crashed): exit 1.
+
+    Episodes saved so far stay valid; re-running continues from them.
+    """
+
+
+# --------------------------------------------------------------------------- task checks
+def resolve_task(env_id: str) -> Any:
+    """The manifest row of ``env_id`` after checking that it can be collected.
+
+    Raises :class:`CollectError` for an unknown id (with close matches from the manifest),
+    a task whose family has no oracle, or a task not registered in this installation.
+    """
+    from mikasa_envs.manifest import UnknownEnvIdError, get_task
+
+    from mikasa_oracles import ORACLES
+
+    try:
+        spec = get_task(env_id)
+    except UnknownEnvIdError as exc:
+        raise CollectError(str(exc)) from None
+    if spec.family not in ORACLES:
+        raise CollectError(
+            f"no oracle for {env_id!r} (family {spec.family!r}); mikasa-collect supports the "
+            f"families {', '.join(sorted(ORACLES))}"
+        )
+    import mikasa_envs  # registers the envs (imports the simulator)
+
+    if env_id not in mikasa_envs.registered_env_ids():
+        raise CollectError(
+            f"{env_id!r} is in the manifest but not implemented in this installation"
+        )
+    return spec
+
+
+def default_max_attempts(missing: int) -> int:
+    """Attempt budget of one run when ``--max-attempts`` is not given: 10 per missing
+    episode, at least 100 (an oracle far below 10 % success is broken, not unlucky)."""
+    return max(100, 10 * missing)
+
+
+# --------------------------------------------------------------------------- one attempt
+@dataclass(frozen=True)
+class AttemptResult:
+    """Outcome of one seed. ``staged`` is the staged episode file when ``saved``."""
+
+    seed: int
+    saved: bool
+    reason: str
+    length: int
+    reward_sum: float
+    wall_s: float
+    staged: str | None = None
+    error: str | None = None
+
+
+def _first(value: Any) -> Any:
+    """Element 0 of a batched tensor/array/list, else the value."""
+    if hasattr(value, "reshape"):
+        return value.reshape(-1)[0]
+    if isinstance(value, (list, tuple)):
+        return value[0] if value else None
+    return value
+
+
+def _language(info: Any) -> str:
+    if not isinstance(info, dict):
+        return ""
+    value = info.get("language_instruction")
+    if isinstance(value, (list, tuple, np.ndarray)):
+        value = value[0] if len(value) else ""
+    return value if isinstance(value, str) else ""
+
+
+def _seed_global_rngs(seed: int) -> None:
+    """So an oracle drawing from global RNGs still depends only on the episode seed."""
+    import torch
+
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def make_collection_env(env_id: str) -> Any:
+    """The recording env: ``gym.make`` with the dataset's settings + the canonical chain."""
+    import gymnasium as gym
+    import mikasa_envs  # noqa: F401  (registers the envs)
+    from mikasa_wrappers import apply_mikasa_vla_wrappers
+
+    env = gym.make(
+        env_id,
+        num_envs=1,
+        obs_mode="rgb",
+        control_mode=CONTROL_MODE,
+        reward_mode=REWARD_MODE,
+        sim_backend=SIM_BACKEND,
+    )
+    try:
+        return apply_mikasa_vla_wrappers(env)
+    except BaseException:
+        env.close()
+        raise
+
+
+class _AttemptRunner:
+    """Runs attempts of one task: owns one env and its oracle (built on first use)."""
+
+    def __init__(
+        self, env_id: str, staging_dir: str, min_length: int, fallback_language: str
+    ) -> None:
+        self.env_id = env_id
+        self.staging_dir = Path(staging_dir)
+        self.min_length = min_length
+        self.fallback_language = fallback_language
+        self.env: Any = None
+        self.oracle: Any = None
+
+    def _ensure_env(self) -> None:
+        if self.env is None:
+            from mikasa_oracles import make_oracle
+
+            self.env = make_collection_env(self.env_id)
+            self.oracle = make_oracle(self.env)
+
+    def run(self, seed: int) -> AttemptResult:
+        """Roll out ``seed``; stage the episode if it is kept. Errors become ``error``."""
+        t0 = time.perf_counter()
+        try:
+            return self._run(seed, t0)
+        except Exception:
+            # The env may be mid-episode or broken: rebuild it for the next attempt.
+            self.close()
+            return AttemptResult(
+                seed, False, "error", 0, 0.0, time.perf_counter() - t0, error=traceback.format_exc()
+            )
+
+    def _run(self, seed: int, t0: float) -> AttemptResult:
+        from mikasa_datasets.npz import make_episode, write_episode
+
+        self._ensure_env()
+        env, oracle = self.env, self.oracle
+        max_steps = int(env.max_episode_steps)
+        _seed_global_rngs(seed)
+        obs, info = env.reset(seed=seed)
+        oracle.reset()
+        language = _language(info)
+        frames: dict[str, list[Any]] = {
+            k: [] for k in ("rgb", "proprio", "action", "reward", "success", "done")
+        }
+        success = finished = False
+        for _ in range(max_steps):
+            # Observation o_t before the step (copied: the env may reuse its buffers).
+            frames["rgb"].append(obs["rgb"][0].cpu().numpy().copy())
+            frames["proprio"].append(obs["proprio"][0].cpu().numpy().copy())
+            # Stored and executed action are the same clipped float32 vector.
+            action = np.clip(
+                np.asarray(oracle.forward(obs), dtype=np.float32).reshape(-1), -1.0, 1.0
+            )
+            obs, reward, terminated, truncated, info = env.step(action)
+            language = language or _language(info)
+            success = bool(_first(info["success"]))
+            finished = success or bool(_first(terminated)) or bool(_first(truncated))
+            frames["action"].append(action)
+            frames["reward"].append(float(_first(reward)))
+            frames["success"].append(int(success))
+            frames["done"].append(int(finished))
+            if finished:
+                break
+        length = len(frames["reward"])
+        reward_sum = float(np.sum(np.asarray(frames["reward"], dtype=np.float32), dtype=np.float64))
+        if not success:
+            reason = "unsuccessful" if finished else "timeout"
+            return AttemptResult(seed, False, reason, length, reward_sum, time.perf_counter() - t0)
+        if length < self.min_length:
+            return AttemptResult(
+                seed, False, "too_short", length, reward_sum, time.perf_counter() - t0
+            )
+        episode = make_episode(
+            rgb=np.stack(frames["rgb"]),
+            proprio=np.stack(frames["proprio"]),
+            action=np.stack(frames["action"]),
+            reward=frames["reward"],
+            success=frames["success"],
+            done=frames["done"],
+            language_instruction=language or self.fallback_language,
+            episode_seed=seed,
+        )
+        staged = self.staging_dir / f"{STAGED_PREFIX}{seed}.npz"
+        write_episode(staged, episode, max_episode_steps=max_steps, min_length=self.min_length)
+        return AttemptResult(
+            seed, True, "saved", length, reward_sum, time.perf_counter() - t0, str(staged)
+        )
+
+    def close(self) -> None:
+        """Close the env (the next attempt builds a fresh one)."""
+        if self.env is not None:
+            try:
+                self.env.close()
+            except Exception:
+                pass
+        self.env = self.oracle = None
+
+
+# --------------------------------------------------------------------------- executors
+class _InlinePool:
+    """``--workers 1``: attempts run in this process, one at a time."""
+
+    def __init__(self, runner_args: tuple[Any, ...]) -> None:
+        self.runner = _AttemptRunner(*runner_args)
+        self.queue: list[int] = []
+
+    def submit(self, seed: int) -> None:
+        self.queue.append(seed)
+
+    def get(self) -> AttemptResult:
+        return self.runner.run(self.queue.pop(0))
+
+    def close(self) -> None:
+        self.runner.close()
+
+
+def _worker_main(worker_id: int, runner_args: tuple[Any, ...], jobs: Any, results: Any) -> None:
+    """Entry point of a spawn-started worker: run seeds from ``jobs`` until ``None``."""
+    # Ctrl-C goes to the whole process group; the parent decides (it stops the pool).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # W workers already use the cores: one thread each.
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    logging.getLogger("mani_skill").setLevel(logging.ERROR)
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+        runner = _AttemptRunner(*runner_args)
+    except BaseException:
+        results.put(("fatal", worker_id, traceback.format_exc()))
+        return
+    parent = mp.parent_process()
+    try:
+        while True:
+            try:
+                seed = jobs.get(timeout=1.0)
+            except queue.Empty:
+                # The parent was killed (kill -9): exit instead of idling forever.
+                if parent is not None and not parent.is_alive():
+                    break
+                continue
+            if seed is None:
+                break
+            results.put(("done", worker_id, runner.run(seed)))
+    finally:
+        runner.close()
+
+
+class _ProcessPool:
+    """``--workers W``: W spawn-started processes sharing one job queue."""
+
+    def __init__(self, runner_args: tuple[Any, ...], workers: int) -> None:
+        ctx = mp.get_context("spawn")
+        self.jobs = ctx.Queue()
+        self.results = ctx.Queue()
+        self.in_flight: set[int] = set()
+        self.processes = [
+            ctx.Process(
+                target=_worker_main,
+                args=(wid, runner_args, self.jobs, self.results),
+                daemon=True,
+                name=f"mikasa-collect-{wid}",
+            )
+            for wid in range(workers)
+        ]
+        for p in self.processes:
+            p.start()
+
+    def submit(self, seed: int) -> None:
+        self.in_flight.add(seed)
+        self.jobs.put(seed)
+
+    def get(self) -> AttemptResult:
+        while True:
+            try:
+                kind, wid, payload = self.results.get(timeout=1.0)
+            except queue.Empty:
+                dead = [p for p in self.processes if not p.is_alive()]
+                if dead and self.in_flight:
+                    raise CollectionFailed(
+                        f"worker {dead[0].name} died (exit code {dead[0].exitcode}) with seeds "
+                        f"{sorted(self.in_flight)} in flight; saved episodes are kept, rerun to resume"
+                    ) from None
+                continue
+            if kind == "fatal":
+                raise CollectionFailed(f"worker {wid} failed to start:\n{payload}")
+            self.in_flight.discard(payload.seed)
+            return payload
+
+    def close(self, graceful: bool = True) -> None:
+        if graceful and not self.in_flight:
+            for _ in self.processes:
+                self.jobs.put(None)
+            deadline = time.monotonic() + 30
+            for p in self.processes:
+                p.join(timeout=max(0.1, deadline - time.monotonic()))
+        # Error / interrupt: stop now; their attempts were not committed and will be rerun.
+        for p in self.processes:
+            if p.is_alive():
+                p.terminate()
+        for p in self.processes:
+            p.join(timeout=5)
+            if p.is_alive():
+                p.kill()
+                p.join(timeout=5)
+
+
+# --------------------------------------------------------------------------- the collection
+@dataclass
+class CollectionSummary:
+    """What one ``collect`` call did."""
+
+    env_id: str
+    dataset_dir: Path
+    num_episodes: int
+    existing_episodes: int
+    new_episodes: int = 0
+    attempts: int = 0
+    successes: int = 0
+    frames: int = 0
+    wall_s: float = 0.0
+    workers: int = 1
+    seeds: tuple[int, int] | None = None
+    reasons: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def success_rate(self) -> float:
+        """Successful attempts / attempts of this run (NaN if none)."""
+        return self.successes / self.attempts if self.attempts else float("nan")
+
+    @property
+    def episodes_per_min(self) -> float:
+        """New episodes per minute of wall time of this run."""
+        return 60.0 * self.new_episodes / self.wall_s if self.wall_s > 0 else float("nan")
+
+    def format(self) -> str:
+        """Multi-line human-readable summary."""
+        seeds = f" (seeds {self.seeds[0]}-{self.seeds[1]})" if self.seeds else ""
+        rate = f"{100 * self.success_rate:.1f}%" if self.attempts else "n/a"
+        others = {k: v for k, v in sorted(self.reasons.items()) if k != "saved"}
+        rejected = (
+            (", rejected: " + ", ".join(f"{k} {v}" for k, v in others.items())) if others else ""
+        )
+        return "\n".join(
+            [
+                f"{self.env_id}: {self.new_episodes} new episode(s), "
+                f"{self.existing_episodes + self.new_episodes}/{self.num_episodes} in {self.dataset_dir}",
+                f"  attempts: {self.attempts}{seeds}, successes: {self.successes}, success rate: {rate}{rejected}",
+                f"  frames: {self.frames}, wall time: {self.wall_s:.1f} s, "
+                f"{self.episodes_per_min:.1f} episodes/min with {self.workers} worker(s)",
+            ]
+        )
+
+
+@contextmanager
+def _locked(directory: Path) -> Iterator[None]:
+    """Exclusive advisory lock on the task directory: two collectors into one directory
+    would interleave indices."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise CollectError(f"another mikasa-collect is writing to {directory}") from None
+        yield
+    finally:
+        os.close(fd)
+
+
+def _clean_staging(staging: Path) -> None:
+    """Remove this collector's staged and temporary files, then empty staging dirs."""
+    from mikasa_datasets.npz import is_temp_file
+
+    if staging.is_dir():
+        for p in staging.iterdir():
+            if p.is_file() and (
+                is_temp_file(p) or (p.name.startswith(STAGED_PREFIX) and p.suffix == ".npz")
+            ):
+                p.unlink(missing_ok=True)
+    for d in (staging, staging.parent):
+        try:
+            d.rmdir()  # only if empty: other tasks may be staging next to us
+        except OSError:
+            pass
+
+
+def _existing_episodes(directory: Path, env_id: str, start_seed: int) -> list[Any]:
+    """Check the episodes already in ``directory`` and return their summaries (resume)."""
+    from mikasa_datasets.npz import (
+        METADATA_FILENAME,
+        EpisodeFormatError,
+        read_metadata,
+        summarize_directory,
+    )
+
+    try:
+        existing = summarize_directory(directory)
+    except EpisodeFormatError as exc:
+        raise CollectError(
+            f"cannot resume: {exc}. Delete that file and every later train_data_<i>.npz "
+            f"(they are re-collected identically), or use another --out"
+        ) from None
+    if (directory / METADATA_FILENAME).exists():
+        try:
+            meta_env = read_metadata(directory)["env_id"]
+        except ValueError:
+            meta_env = env_id  # unreadable metadata is rewritten below
+        if meta_env != env_id:
+            raise CollectError(f"{directory} holds episodes of {meta_env!r}, not {env_id!r}")
+    seeds = [e.episode_seed for e in existing]
+    if any(b <= a for a, b in zip(seeds, seeds[1:], strict=False)):
+        raise CollectError(
+            f"cannot resume: episode seeds in {directory} are not increasing: {seeds}"
+        )
+    if seeds and seeds[0] < start_seed:
+        raise CollectError(
+            f"cannot resume: {directory} was collected from seed {seeds[0]} or lower, but "
+            f"--start-seed is {start_seed}; pass --start-seed {seeds[0]} or use another --out"
+        )
+    return existing
+
+
+def collect(
+    env_id: str,
+    num_episodes: int,
+    out: str | os.PathLike[str] = DEFAULT_OUT,
+    *,
+    workers: int = 1,
+    start_seed: int = DEFAULT_START_SEED,
+    max_attempts: int | None = None,
+    min_episode_length: int = DEFAULT_MIN_EPISODE_LENGTH,
+    progress: bool = True,
+    log_attempts: bool = False,
+) -> CollectionSummary:
+    """Collect ``num_episodes`` successful oracle episodes of ``env_id`` under ``out``.
+
+    Resumes what is already in ``<out>/data_npz/<dataset_name>/``. ``max_attempts`` bounds
+    the attempts of this call (default :func:`default_max_attempts`). Raises
+    :class:`CollectError` for bad input and :class:`CollectionFailed` if the budget runs
+    out or a worker crashes; saved episodes stay valid in both cases.
+    """
+    from mikasa_datasets.npz import batched_dir as staging_dir_of
+    from mikasa_datasets.npz import (
+        episode_file_name,
+        read_episode_summary,
+        remove_stale_temp_files,
+        task_dir,
+        write_metadata,
+    )
+
+    for name, value, low in (
+        ("num_episodes", num_episodes, 1),
+        ("workers", workers, 1),
+        ("min_episode_length", min_episode_length, 1),
+    ):
+        if int(value) < low:
+            raise CollectError(f"{name} must be >= {low}, got {value}")
+    if max_attempts is not None and max_attempts < 1:
+        raise CollectError(f"max_attempts must be >= 1, got {max_attempts}")
+    if not 0 <= start_seed <= MAX_SEED:
+        raise CollectError(f"start_seed must be in [0, {MAX_SEED}], got {start_seed}")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise CollectError(f"--out {out} exists and is not a directory")
+    spec = resolve_task(env_id)
+
+    t0 = time.perf_counter()
+    directory = task_dir(out, env_id)
+    staging = staging_dir_of(out, env_id)
+    directory.mkdir(parents=True, exist_ok=True)
+    summary = CollectionSummary(env_id, directory, num_episodes, 0, workers=workers)
+    with _locked(directory):
+        # A run killed mid-write leaves temporary files (never final names) and staged
+        # attempts; both are redone deterministically.
+        remove_stale_temp_files(directory)
+        _clean_staging(staging)
+        committed = _existing_episodes(directory, env_id, start_seed)
+        summary.existing_episodes = len(committed)
+        if len(committed) > num_episodes:
+            raise CollectError(
+                f"{directory} already holds {len(committed)} episodes, more than the "
+                f"{num_episodes} requested; raise --num-episodes or use another --out"
+            )
+
+        def save_metadata() -> None:
+            write_metadata(
+                directory, env_id, committed, batched_source_dir=staging, unbatched_dir=directory
+            )
+
+        if committed:
+            save_metadata()  # repairs a stale file (e.g. after deleting the last episode)
+        if len(committed) == num_episodes:
+            summary.wall_s = time.perf_counter() - t0
+            return summary
+
+        missing = num_episodes - len(committed)
+        budget = max_attempts if max_attempts is not None else default_max_attempts(missing)
+        first_seed = max(start_seed, committed[-1].episode_seed + 1) if committed else start_seed
+        if first_seed > MAX_SEED:
+            raise CollectError(f"no seeds left: the next seed {first_seed} exceeds {MAX_SEED}")
+        staging.mkdir(parents=True, exist_ok=True)
+        runner_args = (env_id, str(staging), min_episode_length, spec.language_instruction)
+        n_workers = min(workers, missing)
+        pool: Any = (
+            _InlinePool(runner_args) if n_workers == 1 else _ProcessPool(runner_args, n_workers)
+        )
+        log_attempts = (
+            log_attempts or os.environ.get("MIKASA_LOG_EPISODE_LENGTHS", "").lower() in _TRUTHY
+        )
+
+        from tqdm.auto import tqdm
+
+        bar = tqdm(
+            total=num_episodes,
+            initial=len(committed),
+            desc=env_id,
+            unit="ep",
+            disable=not progress,
+            dynamic_ncols=True,
+        )
+        pending: dict[int, AttemptResult] = {}
+        in_flight: set[int] = set()
+        next_seed = commit_seed = first_seed
+        ok = False
+        try:
+            while len(committed) < num_episodes:
+                # Never more attempts in flight than episodes could still be missing.
+                staged_ok = sum(r.saved for r in pending.values())
+                while (
+                    len(in_flight) < n_workers
+                    and summary.attempts < budget
+                    and next_seed <= MAX_SEED
+                    and len(committed) + len(in_flight) + staged_ok < num_episodes
+                ):
+                    pool.submit(next_seed)
+                    in_flight.add(next_seed)
+                    next_seed += 1
+                    summary.attempts += 1
+                if not in_flight:
+                    break  # budget spent
+                result = pool.get()
+                in_flight.discard(result.seed)
+                if result.error is not None:
+                    raise CollectionFailed(
+                        f"attempt with seed {result.seed} crashed:\n{result.error}"
+                    )
+                pending[result.seed] = result
+                summary.reasons[result.reason] = summary.reasons.get(result.reason, 0) + 1
+                summary.successes += result.saved
+                if log_attempts:
+                    bar.write(
+                        f"[EPISODE] env={env_id} attempt={result.seed - first_seed} seed={result.seed} "
+                        f"length={result.length} success={int(result.reason in ('saved', 'too_short'))} "
+                        f"saved={int(result.saved)} reason={result.reason}"
+                    )
+                # Commit in seed order: an episode's index never depends on timing.
+                while commit_seed in pending:
+                    r = pending.pop(commit_seed)
+                    commit_seed += 1
+                    if not r.saved:
+                        continue
+                    final = directory / episode_file_name(len(committed))
+                    os.replace(r.staged, final)
+                    committed.append(read_episode_summary(final))
+                    summary.new_episodes += 1
+                    summary.frames += r.length
+                    save_metadata()
+                    bar.update(1)
+                bar.set_postfix(
+                    attempts=summary.attempts, success=f"{summary.successes}/{summary.attempts}"
+                )
+            ok = True
+        finally:
+            bar.close()
+            if isinstance(pool, _ProcessPool):
+                pool.close(graceful=ok)
+            else:
+                pool.close()
+            _clean_staging(staging)
+            summary.wall_s = time.perf_counter() - t0
+            if summary.attempts:
+                summary.seeds = (first_seed, next_seed - 1)
+        if len(committed) < num_episodes:
+            raise CollectionFailed(
+                f"only {len(committed)}/{num_episodes} episodes after {summary.attempts} attempts "
+                f"(seeds {first_seed}-{next_seed - 1}, {summary.successes} kept); raise "
+                f"--max-attempts and rerun to continue\n{summary.format()}"
+            )
+    return summary
+
+
+# --------------------------------------------------------------------------- CLI
+def _int_at_least(low: int) -> Any:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``mikasa-collect`` argument parser."""
+    p = argparse.ArgumentParser(
+        prog="mikasa-collect",
+        description=(
+            "Collect successful oracle demonstrations of a MIKASA-Robo-VLA task as NPZ episodes "
+            "(<out>/data_npz/<dataset_name>/train_data_<i>.npz + metadata.json). Observations are "
+            "rgb (two 128x128 cameras) + 7-D proprio, actions pd_ee_delta_pose, rewards "
+            "normalized_dense. Re-running the same command resumes an interrupted collection."
+        ),
+    )
+    p.add_argument("--env-id", required=True, help="task id, e.g. RememberColor3-VLA-v0")
+    p.add_argument(
+        "--num-episodes",
+        "--num-train-data",
+        type=_int_at_least(1),
+        default=DEFAULT_NUM_EPISODES,
+        help=f"successful episodes wanted in total (default {DEFAULT_NUM_EPISODES})",
+    )
+    p.add_argument(
+        "--out",
+        "--path-to-save-data",
+        default=DEFAULT_OUT,
+        help=f"dataset root (default {DEFAULT_OUT})",
+    )
+    p.add_argument(
+        "--workers", type=_int_at_least(1), default=1, help="parallel worker processes (default 1)"
+    )
+    p.add_argument(
+        "--start-seed",
+        "--seed",
+        type=_int_at_least(0),
+        default=DEFAULT_START_SEED,
+        help=f"seed of attempt 0; attempt k uses start_seed + k (default {DEFAULT_START_SEED})",
+    )
+    p.add_argument(
+        "--max-attempts",
+        type=_int_at_least(1),
+        default=None,
+        help="attempts allowed in this run (default: 10 per missing episode, at least 100)",
+    )
+    p.add_argument(
+        "--min-episode-length",
+        type=_int_at_least(1),
+        default=DEFAULT_MIN_EPISODE_LENGTH,
+        help=f"discard successes shorter than this (default {DEFAULT_MIN_EPISODE_LENGTH}, as upstream)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--log-attempts",
+        action="store_true",
+        help="print one line per attempt (also on with MIKASA_LOG_EPISODE_LENGTHS=1)",
+    )
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console entry point; returns the exit status (0 ok, 1 failed, 2 bad input, 130 Ctrl-C)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)  # exits with status 2 on malformed arguments
+    logging.getLogger("mani_skill").setLevel(logging.ERROR)
+    try:
+        summary = collect(
+            args.env_id,
+            args.num_episodes,
+            args.out,
+            workers=args.workers,
+            start_seed=args.start_seed,
+            max_attempts=args.max_attempts,
+            min_episode_length=args.min_episode_length,
+            progress=not args.no_progress,
+            log_attempts=args.log_attempts,
+        )
+    except CollectError as exc:
+        print(f"mikasa-collect: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CollectionFailed as exc:
+        print(f"mikasa-collect: collection failed: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print(
+            "mikasa-collect: interrupted; the episodes saved so far are kept — rerun the same "
+            "command to continue",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    print(summary.format())
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())
