@@ -49,6 +49,7 @@ import os
 import shutil
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -237,6 +238,10 @@ def write_lerobot(
     last_task = default_task
     n_eps = n_frames = 0
     try:
+        # lerobot's histogram stats cast the bool next.* columns to uint8 and warn each time.
+        warnings.filterwarnings(
+            "ignore", message="Converting input from bool", category=RuntimeWarning
+        )
         for ep in episodes:
             text = str(ep["language_instruction"]).strip()
             if text:

@@ -1,0 +1,239 @@
+"""NPZ -> LeRobot v3 and RLDS -> LeRobot v3 (mikasa_datasets.lerobot): lerobot's own
+format, offline loading with LeRobotDataset, round trip (exact for state, action, reward,
+success, done and instruction; video frames within a PSNR tolerance), output protocol,
+corrupt input, CLI.
+
+Needs lerobot + tensorflow: in the main environment this file contributes one test that
+runs it inside `.venv-datasets` (see tests/test_validate.py for the mechanism).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+IN_DATASETS_ENV = importlib.util.find_spec("tensorflow_datasets") is not None
+ENV_ID = "RotateLenientPos-VLA-v0"
+NAME = "rotate_lenient_pos_vla_v0"
+# Video tolerance: AV1 (libsvtav1, crf 30, yuv420p) on render-like frames. Measured on the
+# synthetic scenes here: ~33-36 dB mean, >= 30 dB worst camera-episode; 30 dB is the bar.
+MIN_PSNR_DB = 30.0
+
+if not IN_DATASETS_ENV:
+    from test_validate import run_suite_in_datasets_env
+
+    def test_lerobot_suite_in_datasets_env() -> None:
+        """Every test below, run inside `.venv-datasets`."""
+        run_suite_in_datasets_env(__file__)
+
+else:
+    from mikasa_datasets import cli, rlds
+    from mikasa_datasets import lerobot as lr
+    from mikasa_datasets.loaders import (
+        DatasetFormatError,
+        OutputExistsError,
+        load_episodes,
+        write_synthetic_task,
+    )
+    from mikasa_datasets.npz import EpisodeFormatError
+
+    LENGTHS = [12, 25, 17]
+    # Rotate tasks embed a per-episode angle: several task strings in one dataset.
+    INSTRUCTIONS = ["Rotate the peg by 30°.", "Rotate the peg by 45°.", "Rotate the peg by 30°."]
+
+    @pytest.fixture(scope="module")
+    def npz_task(tmp_path_factory: pytest.TempPathFactory) -> Path:
+        root = tmp_path_factory.mktemp("lerobot")
+        return write_synthetic_task(
+            root / "data_npz", ENV_ID, LENGTHS, instruction=INSTRUCTIONS, seed=11
+        )
+
+    @pytest.fixture(scope="module")
+    def from_npz(npz_task: Path) -> lr.ConversionResult:
+        return lr.convert_npz_to_lerobot(npz_task, npz_task.parent.parent / "data_lerobot")
+
+    @pytest.fixture(scope="module")
+    def from_rlds(npz_task: Path) -> lr.ConversionResult:
+        root = npz_task.parent.parent
+        r = rlds.convert_npz_to_rlds(npz_task, root / "data_rlds")
+        return lr.convert_rlds_to_lerobot(r.path.parent, root / "data_lerobot_from_rlds")
+
+    def test_meta_matches_spec(npz_task: Path, from_npz: lr.ConversionResult) -> None:
+        root = from_npz.path
+        assert root == npz_task.parent.parent / "data_lerobot" / NAME
+        info = json.loads((root / "meta" / "info.json").read_text())
+        assert info["codebase_version"] == "v3.0"
+        assert (info["robot_type"], info["fps"]) == ("mikasa_robo", 10)
+        assert (info["total_episodes"], info["total_frames"]) == (3, sum(LENGTHS))
+        assert info["total_tasks"] == 2
+        feats = info["features"]
+        for key in (lr.TOP_KEY, lr.WRIST_KEY):
+            assert feats[key]["dtype"] == "video"
+            assert feats[key]["shape"] == [128, 128, 3]
+            assert feats[key]["names"] == ["height", "width", "channel"]
+            assert feats[key]["info"]["video.codec"] == "av1"
+            assert feats[key]["info"]["video.fps"] == 10
+        assert feats[lr.STATE_KEY]["shape"] == [7] and feats[lr.ACTION_KEY]["shape"] == [7]
+        for key in (
+            lr.REWARD_KEY,
+            lr.SUCCESS_KEY,
+            lr.DONE_KEY,
+            "timestamp",
+            "frame_index",
+            "episode_index",
+            "index",
+            "task_index",
+        ):
+            assert key in feats
+        assert (root / "meta" / "stats.json").is_file() and (
+            root / "meta" / "tasks.parquet"
+        ).is_file()
+        assert list((root / "meta" / "episodes").glob("chunk-000/file-000.parquet"))
+        assert list((root / "data").glob("chunk-000/file-000.parquet"))
+        assert list((root / "videos" / lr.TOP_KEY).glob("chunk-000/file-000.mp4"))
+        # source metadata copied (spec §7.2); nothing else left next to the dataset
+        assert (root / lr.SOURCE_METADATA_NAME).read_bytes() == (
+            npz_task / "metadata.json"
+        ).read_bytes()
+        assert [p.name for p in root.parent.iterdir()] == [NAME]
+
+    def test_round_trip(npz_task: Path, from_npz: lr.ConversionResult) -> None:
+        source = load_episodes(npz_task)
+        back = load_episodes(from_npz.path)  # auto-detected as LeRobot
+        assert len(back) == len(source)
+        worst = []
+        for i, (a, b) in enumerate(zip(source, back, strict=True)):
+            for key in a:
+                assert a[key].dtype == b[key].dtype and a[key].shape == b[key].shape, (i, key)
+                if key != "rgb":  # exact: state, action, reward, success, done, instruction, ...
+                    assert np.array_equal(a[key], b[key]), f"episode {i} {key} differs"
+            for cam in (slice(0, 3), slice(3, 6)):
+                worst.append(lr.psnr(a["rgb"][..., cam], b["rgb"][..., cam]))
+        assert min(worst) >= MIN_PSNR_DB, f"video PSNR per camera-episode {worst}"
+
+    def test_loads_offline_with_lerobot_dataset(from_npz: lr.ConversionResult) -> None:
+        import os
+
+        assert os.environ.get("HF_HUB_OFFLINE") == "1"  # set before lerobot was imported
+        dataset = lr.lerobot_dataset_class()(NAME, root=from_npz.path)
+        assert len(dataset) == sum(LENGTHS) and dataset.meta.total_episodes == 3
+        ours = load_episodes(from_npz.path)
+        flat_state = np.concatenate([e["proprio"] for e in ours])
+        flat_top = np.concatenate([e["rgb"][..., :3] for e in ours])
+        tasks = [
+            str(e["language_instruction"]) for e in ours for _ in range(int(e["episode_length"]))
+        ]
+        for i in range(len(dataset)):  # iterates through lerobot's own video decoding
+            item = dataset[i]
+            assert np.array_equal(item[lr.STATE_KEY].numpy(), flat_state[i])
+            assert item["task"] == tasks[i]
+            frame = (item[lr.TOP_KEY].numpy().transpose(1, 2, 0) * 255).round().astype(np.uint8)
+            assert frame.shape == (128, 128, 3)
+            # torchcodec (system FFmpeg) and PyAV decode the same stream
+            assert lr.psnr(frame, flat_top[i]) > 40.0
+
+    def test_rlds_to_lerobot_equals_npz_to_lerobot(
+        from_npz: lr.ConversionResult, from_rlds: lr.ConversionResult
+    ) -> None:
+        assert from_rlds.path.name == NAME
+        a, b = load_episodes(from_npz.path), load_episodes(from_rlds.path)
+        assert len(a) == len(b) == 3
+        for x, y in zip(a, b, strict=True):
+            for key in x:
+                assert np.array_equal(x[key], y[key]), (
+                    key
+                )  # same frames in, same encoder: identical
+        assert (from_rlds.path / lr.SOURCE_METADATA_NAME).is_file()
+
+    def test_no_videos_is_exact(npz_task: Path, tmp_path: Path) -> None:
+        r = lr.convert_npz_to_lerobot(npz_task, tmp_path, use_videos=False, max_episodes=1)
+        info = json.loads((r.path / "meta" / "info.json").read_text())
+        assert info["features"][lr.TOP_KEY]["dtype"] == "image"
+        (a,), (b,) = load_episodes(npz_task)[:1], load_episodes(r.path)
+        for key in a:
+            assert np.array_equal(a[key], b[key]), key
+
+    def test_existing_output_needs_overwrite_or_resume(npz_task: Path, tmp_path: Path) -> None:
+        r = lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=1)
+        with pytest.raises(OutputExistsError, match=re.escape(str(r.path))):
+            lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=1)
+        assert lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=1, resume=True).skipped
+        # a different episode count no longer matches: resume converts again
+        redone = lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=2, resume=True)
+        assert not redone.skipped and redone.episodes == 2
+        again = lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=1, overwrite=True)
+        assert again.episodes == 1 and len(load_episodes(again.path)) == 1
+        assert [p.name for p in tmp_path.iterdir()] == [NAME]  # no staging or old copies
+
+    def test_repo_id_template(npz_task: Path, tmp_path: Path) -> None:
+        r = lr.convert_npz_to_lerobot(
+            npz_task, tmp_path, repo_id_template="mikasa/{task}", max_episodes=1
+        )
+        assert r.path == tmp_path / "mikasa" / NAME
+        with pytest.raises(ValueError, match="must contain"):
+            lr.convert_npz_to_lerobot(npz_task, tmp_path, repo_id_template="fixed")
+
+    def test_corrupt_input_names_the_file_and_writes_nothing(tmp_path: Path) -> None:
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 11])
+        bad = task / "train_data_1.npz"
+        bad.write_bytes(bad.read_bytes()[:3000])
+        out = tmp_path / "data_lerobot"
+        with pytest.raises((DatasetFormatError, EpisodeFormatError), match=re.escape(str(bad))):
+            lr.convert_npz_to_lerobot(task, out)
+        assert list(out.iterdir()) == []  # the staging directory was removed
+
+    def test_corrupt_rlds_shard_names_the_shard(tmp_path: Path) -> None:
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 11])
+        r = rlds.convert_npz_to_rlds(task, tmp_path / "data_rlds")
+        shard = rlds.shard_files(r.path)[0]
+        shard.write_bytes(shard.read_bytes()[: shard.stat().st_size - 500])
+        with pytest.raises(DatasetFormatError, match=re.escape(str(shard))):
+            lr.convert_rlds_to_lerobot(r.path, tmp_path / "data_lerobot")
+        assert list((tmp_path / "data_lerobot").iterdir()) == []
+
+    def test_cli_to_lerobot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 12])
+        write_synthetic_task(tmp_path / "data_npz", "ShellGameTouch-VLA-v0", [11])
+        root = ["--root", str(tmp_path)]
+        assert cli.main(["to-lerobot", *root, "--all", "--from", "npz"]) == 0
+        out = capsys.readouterr().out
+        assert (
+            f"to-lerobot {NAME}: 2 episodes, 22 frames" in out
+            and "shell_game_touch_vla_v0: 1 episodes" in out
+        )
+        assert cli.main(["to-rlds", *root, "--all"]) == 0
+        assert (
+            cli.main(["to-lerobot", *root, "--task", ENV_ID, "--lerobot-root", str(tmp_path / "b")])
+            == 0
+        )
+        assert (
+            cli.main(["to-lerobot", *root, "--task", ENV_ID, "--lerobot-root", str(tmp_path / "b")])
+            == 1
+        )
+        assert "already exists" in capsys.readouterr().err
+        assert (
+            cli.main(
+                [
+                    "to-lerobot",
+                    *root,
+                    "--all",
+                    "--lerobot-root",
+                    str(tmp_path / "b"),
+                    "--resume",
+                    "--fps",
+                    "10",
+                ]
+            )
+            == 0
+        )
+        assert "kept existing" in capsys.readouterr().out
+        assert (
+            cli.main(["validate", str(tmp_path / "data_lerobot"), str(tmp_path / "b" / NAME)]) == 0
+        )
+        assert cli.main(["to-lerobot", *root, "--task", "NoSuchTask-VLA-v0"]) == 1
+        assert "no_such_task_vla_v0" in capsys.readouterr().err
