@@ -316,8 +316,10 @@ def _worker_main(worker_id: int, runner_args: tuple[Any, ...], jobs: Any, result
     """Entry point of a spawn-started worker: run seeds from ``jobs`` until ``None``."""
     # Ctrl-C goes to the whole process group; the parent decides (it stops the pool).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # W workers already use the cores: one thread each.
+    # W workers already use the cores: one thread each, for torch and for Mesa's CPU
+    # Vulkan rasteriser (its frames do not depend on the thread count).
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("LP_NUM_THREADS", "1")
     logging.getLogger("mani_skill").setLevel(logging.ERROR)
     try:
         import torch
@@ -389,7 +391,9 @@ class _ProcessPool:
         if graceful and not self.in_flight:
             for _ in self.processes:
                 self.jobs.put(None)
-            deadline = time.monotonic() + 30
+            # Nothing is left to write (every attempt came back), so a worker slow to tear
+            # down its simulator is not worth waiting for.
+            deadline = time.monotonic() + 3
             for p in self.processes:
                 p.join(timeout=max(0.1, deadline - time.monotonic()))
         # Error / interrupt: stop now; their attempts were not committed and will be rerun.
