@@ -21,6 +21,7 @@ from .protocol import (
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,
     OBS_MODE,
+    RENDER_DEVICES,
     REWARD_MODE,
     START_SEED,
     SUPPORTED_OBS_MODES,
@@ -50,6 +51,9 @@ _RUN_DEFINING = (
     "start_seed",
     "obs_mode",
     "sim_backend",
+    "video",
+    "render_device",
+    "gpu_render_workers",
     "out",
     "output_dir",
     "csv",
@@ -127,6 +131,28 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--sim-backend", default=None, help=f"ManiSkill sim backend (default {DEFAULT_SIM_BACKEND})"
     )
+    run.add_argument(
+        "--video",
+        action="store_true",
+        default=None,
+        help="record every episode as videos/<env_id>/episode_<i>.mp4 (scene view with the "
+        "task's overlays beside the top and wrist cameras); results are unchanged",
+    )
+    run.add_argument(
+        "--render-device",
+        choices=RENDER_DEVICES,
+        default=None,
+        help="where workers render: auto (GPU if any, else CPU; default), cpu (lavapipe, "
+        "also on a GPU machine) or gpu",
+    )
+    run.add_argument(
+        "--gpu-render-workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="mixed pool, with --render-device cpu: the first N workers render on the GPU, "
+        "the others on the CPU",
+    )
     out = run.add_mutually_exclusive_group()
     out.add_argument("--out", default=None, metavar="DIR", help="exact run directory")
     out.add_argument(
@@ -180,7 +206,20 @@ def _add_exec_args(p: argparse.ArgumentParser, default_workers: int | None) -> N
         default=default_workers,
         help="worker processes (default: CPU count; 0 = run in this process)",
     )
-    p.add_argument("--executor", default="local", help="local (default); ray is planned")
+    p.add_argument(
+        "--executor",
+        default="local",
+        choices=("local", "ray"),
+        help="local: worker processes on this machine (default); ray: Ray actors spread "
+        "over a cluster (pip install 'mikasa-bench[ray]')",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help="Ray cluster to join (default: $RAY_ADDRESS, else start Ray locally); "
+        "with --executor ray, --workers defaults to the cluster's CPU count",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -255,6 +294,9 @@ def _config(args: argparse.Namespace) -> BenchmarkConfig:
             n_episodes=NUM_EPISODES_PER_TASK if args.num_episodes is None else args.num_episodes,
             obs_mode=args.obs_mode or OBS_MODE,
             sim_backend=args.sim_backend or DEFAULT_SIM_BACKEND,
+            save_videos=bool(args.video),
+            render_device=args.render_device or "auto",
+            gpu_render_workers=args.gpu_render_workers or 0,
         )
     except ValueError as exc:
         raise BenchError(str(exc)) from None
@@ -286,15 +328,18 @@ def _execute_and_report(
     from .results import load_run
     from .runner import execute_runs
 
-    executor = make_executor(args.executor, args.workers)
+    executor = make_executor(args.executor, args.workers, address=args.address)
     dirs = ", ".join(str(s.run_dir) for s in stores)
     pending = sum(len(s.pending()) for s in stores)
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
     desc = executor.describe()
+    details = [f"{desc['workers']} workers"] if "workers" in desc else []
+    if "address" in desc:
+        details.append(f"Ray at {desc['address']}")
+    details.append(f"render {stores[0].config.render_description()}")
     _eprint(
-        f"running {pending} of {total} episodes with the {desc['name']} executor"
-        + (f" ({desc['workers']} workers)" if "workers" in desc else "")
-        + f" -> {dirs}"
+        f"running {pending} of {total} episodes with the {desc['name']} executor "
+        f"({', '.join(details)}) -> {dirs}"
     )
     t0 = time.perf_counter()
     try:
@@ -315,6 +360,8 @@ def _execute_and_report(
     runs = [load_run(s.run_dir, label=s.policy.label) for s in stores]
     print(text_table(runs))
     print(f"\nwall time {wall:.1f} s; results in {dirs}")
+    if any(s.config.save_videos for s in stores):
+        print("videos: " + ", ".join(str(s.run_dir / "videos") for s in stores))
     if report and report_dir is not None:
         md, html_path = write_report(runs, report_dir)
         print(f"report: {md}\n        {html_path}")

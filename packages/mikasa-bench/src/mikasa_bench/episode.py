@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import random
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,8 +113,14 @@ def _dims(a: tuple[int, ...]) -> str:
 
 
 def run_episode(
-    env: Any, policy: Any, episode_seed: int, *, reset_policy_hook: bool = True
-) -> tuple[EpisodeResult, None]:
+    env: Any,
+    policy: Any,
+    episode_seed: int,
+    *,
+    reset_policy_hook: bool = True,
+    collect_video: bool = False,
+    frame_sink: Callable[[np.ndarray], None] | None = None,
+) -> tuple[EpisodeResult, list[np.ndarray] | None]:
     """Run one episode of ``env`` (already wrapped, ``num_envs=1``) with ``policy``.
 
     Protocol (benchmark.md §6.2): reset with ``episode_seed``; a fresh FIFO action queue
@@ -122,7 +128,12 @@ def run_episode(
     queried whenever the queue is empty; at most ``env.max_episode_steps`` steps; success
     is a latch over ``info["success"]``. Extension: global RNGs are seeded with the episode
     seed and ``policy.reset()`` is called after the env reset (``reset_policy_hook``).
-    Returns ``(EpisodeResult, None)`` (the second item is reserved for video frames).
+
+    Video (§8): with ``frame_sink`` every composed frame (`compose_frame`: ``env.render()``
+    beside the cameras) is passed to it, one before each step and one after the last;
+    ``collect_video=True`` returns them as a list instead of None (memory grows with the
+    episode length: the runner streams to an encoder through ``frame_sink``). Rendering
+    the scene view does not touch the simulation, so results are the same either way.
     """
     import torch
 
@@ -138,9 +149,18 @@ def run_episode(
         reset_policy(policy, episode_seed)
     action_shape = tuple(env.action_space.shape)
     device = getattr(env.unwrapped, "device", None) or torch.device("cpu")
+    frames: list[np.ndarray] | None = [] if collect_video else None
+    sink = frame_sink
+    if frames is not None:
+        sink = frames.append if frame_sink is None else _tee(frames.append, frame_sink)
+    if sink is not None:
+        from .video import compose_frame
+
     queue: deque[Any] = deque()
     success, total, n_steps = False, 0.0, 0
     for _ in range(int(max_steps)):
+        if sink is not None:
+            sink(compose_frame(env.render(), obs))
         if not queue:
             queue.extend(normalize_action_chunk(policy.forward(obs), action_shape))
         action = queue.popleft().to(device=device, dtype=torch.float32).unsqueeze(0)
@@ -151,14 +171,25 @@ def run_episode(
             success = success or bool(_first(info["success"]))
         if bool(_first(terminated)) or bool(_first(truncated)):
             break
-    return EpisodeResult(bool(success), float(total), n_steps, int(episode_seed)), None
+    if sink is not None:
+        sink(compose_frame(env.render(), obs))  # the state after the last step
+    return EpisodeResult(bool(success), float(total), n_steps, int(episode_seed)), frames
 
 
-def _state_chain(env: Any, env_id: str) -> Any:
+def _tee(*sinks: Callable[[np.ndarray], None]) -> Callable[[np.ndarray], None]:
+    def both(frame: np.ndarray) -> None:
+        for f in sinks:
+            f(frame)
+
+    return both
+
+
+def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> Any:
     """The non-canonical ``obs_mode="state"`` chain.
 
     Same action path as the canonical chain (the task's curriculum wrapper), and the same
     7-value ``proprio``; the images are replaced by the flat privileged ``state`` vector.
+    ``include_overlays`` adds the task's render overlays (videos), as in the rgb chain.
     """
     import gymnasium as gym
     import torch
@@ -201,6 +232,9 @@ def _state_chain(env: Any, env_id: str) -> Any:
     wrapped: Any = StateOnlyTensorToDictWrapper(env)
     if config.curriculum_wrapper is not None:
         wrapped = config.curriculum_wrapper(wrapped)
+    if include_overlays:
+        for overlay in config.overlays:
+            wrapped = overlay(wrapped)
     wrapped = FlattenRGBDObservationWrapper(
         wrapped, rgb=False, depth=False, state=True, oracle=False, joints=False
     )
@@ -212,29 +246,43 @@ def _state_chain(env: Any, env_id: str) -> Any:
 def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> Any:
     """``gym.make`` with the protocol's arguments, then the canonical wrapper chain.
 
+    ``render_mode`` is ``"all"`` for metric-only runs and ``"rgb_array"`` when saving
+    videos; overlays are forced on for videos (they only change ``render()`` frames, not
+    observations), as upstream. ``config.render_device`` picks ManiSkill's render backend
+    (executors pass each worker its own device); to render on the CPU on a GPU machine the
+    process must also have restricted Vulkan to lavapipe before its first env (see
+    `mikasa_bench.render`).
     ``obs_mode="state"`` (non-canonical) uses `_state_chain` instead, which needs no
-    rendering at all.
+    rendering unless videos are saved.
     """
     import gymnasium as gym
     import mikasa_envs  # noqa: F401  (registers the envs)
 
+    from .render import gym_render_kwargs
+
     config = config or BenchmarkConfig()
     rgb = config.obs_mode == OBS_MODE
+    if config.save_videos:
+        render_mode: str | None = "rgb_array"
+    else:
+        render_mode = "all" if rgb else None
+    overlays = config.include_overlays or config.save_videos
     env = gym.make(
         env_id,
         num_envs=NUM_ENVS,
         obs_mode=config.obs_mode,
         control_mode=config.control_mode,
-        render_mode="all" if rgb else None,
+        render_mode=render_mode,
         reward_mode=config.reward_mode,
         sim_backend=config.sim_backend,
+        **gym_render_kwargs(config.render_device),
     )
     try:
         if rgb:
             from mikasa_wrappers import apply_mikasa_vla_wrappers
 
-            return apply_mikasa_vla_wrappers(env, include_overlays=config.include_overlays)
-        return _state_chain(env, env_id)
+            return apply_mikasa_vla_wrappers(env, include_overlays=overlays)
+        return _state_chain(env, env_id, include_overlays=overlays)
     except BaseException:
         env.close()
         raise

@@ -11,9 +11,16 @@ seed order, so the numbers never depend on the executor or the worker count.
   for, so each worker moves through the task list in order.
 * `InlineExecutor`: the same worker logic in the calling process (``--workers 0``;
   debugging, tests with fake envs).
+* `mikasa_bench.ray_executor.RayExecutor` (``--executor ray``): Ray actors running the same
+  worker logic, spread over a cluster.
 
-A Ray executor can be added by implementing `Executor.run` (jobs and outcomes are plain
-picklable dataclasses) and registering it in `EXECUTORS`.
+Every worker renders where the run's config says (`BenchmarkConfig.render_device_for` its
+index: a mixed pool gives the first N workers the GPU); the environment a worker needs for
+that (lavapipe-only Vulkan, lavapipe threads) is set when the worker starts, before
+Vulkan is initialised (`mikasa_bench.render`). With ``save_videos`` a worker encodes each
+episode's mp4 and sends the bytes back with the result: the runner writes the file before
+it journals the episode, so a recorded episode always has its video, also with Ray
+workers on other machines.
 """
 
 from __future__ import annotations
@@ -28,13 +35,14 @@ import traceback
 from abc import ABC, abstractmethod
 from collections import OrderedDict, deque
 from collections.abc import Hashable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import BenchError
 from .policies import PolicySpec, build_policy, policy_chunk_size
 from .protocol import BenchmarkConfig
+from .render import apply_environment, check_render_device, worker_environment
 from .tasks import BenchmarkTask
 
 __all__ = [
@@ -45,6 +53,8 @@ __all__ = [
     "LocalExecutor",
     "EXECUTORS",
     "make_executor",
+    "available_cores",
+    "render_config",
 ]
 
 
@@ -78,6 +88,12 @@ class EpisodeOutcome:
     error: str | None = None
     traceback: str | None = None
     user_error: bool = False
+    video: bytes | None = None
+    """The episode's mp4 (``config.save_videos``), written by the runner."""
+    render: str | None = None
+    """Where the worker rendered, e.g. ``"cpu: llvmpipe (LLVM 15.0.6, 256 bits)"``."""
+    setup_s: float = 0.0
+    """Part of ``wall_s`` spent building the env and policy (0 when they were cached)."""
 
     def describe_failure(self) -> str:
         """A message naming the task, episode, seed and policy of a failed job."""
@@ -89,19 +105,27 @@ class EpisodeOutcome:
 
 
 class _EpisodeWorker:
-    """Per-process worker state: one cached env and the policies built for it."""
+    """Per-process worker state: one cached env and the policies built for it.
+
+    ``worker_id`` is the worker's index in its pool; it decides the render device of a
+    mixed pool (`BenchmarkConfig.render_device_for`).
+    """
 
     def __init__(self, worker_id: int) -> None:
         self.worker_id = worker_id
         self.env: Any = None
         self.env_key: Hashable | None = None
         self.policies: dict[str, Any] = {}
+        self.render: str | None = None
 
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
             self.close()
-            self.env = make_benchmark_env(job.task.env_id, job.config)
+            device = job.config.render_device_for(self.worker_id)
+            config = replace(job.config, render_device=device, gpu_render_workers=0)
+            self.env = make_benchmark_env(job.task.env_id, config)
             self.env_key = job.env_key
+            self.render = check_render_device(self.env, device)
         return self.env
 
     def _policy_for(self, job: EpisodeJob, env: Any) -> Any:
@@ -116,9 +140,27 @@ class _EpisodeWorker:
         try:
             env = self._env_for(job)
             policy = self._policy_for(job, env)
+            setup_s = time.perf_counter() - t0
             chunk = policy_chunk_size(policy)
-            result, _ = run_episode(env, policy, job.seed)
-            return EpisodeOutcome(job, result, chunk, time.perf_counter() - t0, self.worker_id)
+            video = None
+            if job.config.save_videos:
+                from .video import EpisodeVideo
+
+                with EpisodeVideo() as recorder:
+                    result, _ = run_episode(env, policy, job.seed, frame_sink=recorder.add)
+                    video = recorder.finish()
+            else:
+                result, _ = run_episode(env, policy, job.seed)
+            return EpisodeOutcome(
+                job,
+                result,
+                chunk,
+                time.perf_counter() - t0,
+                self.worker_id,
+                video=video,
+                render=self.render,
+                setup_s=setup_s,
+            )
         except Exception as exc:
             # The env may be mid-episode: drop it so a later job starts clean.
             self.close()
@@ -141,6 +183,40 @@ class _EpisodeWorker:
             except Exception:
                 pass
         self.env, self.env_key, self.policies = None, None, {}
+
+
+def available_cores() -> int:
+    """CPU cores this process may use (the affinity mask, not the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def render_config(jobs: Sequence[EpisodeJob]) -> BenchmarkConfig:
+    """The config whose render settings every worker of a pool follows.
+
+    A worker process can render on one device only (Vulkan is set up once per process),
+    so all jobs handed to one pool must agree on ``render_device``/``gpu_render_workers``.
+    """
+    settings = {(j.config.render_device, j.config.gpu_render_workers) for j in jobs}
+    if len(settings) > 1:
+        raise BenchError(
+            "the runs given to one executor use different render devices "
+            f"({sorted(settings)}); run them separately"
+        )
+    return jobs[0].config
+
+
+def worker_env_vars(config: BenchmarkConfig, worker_id: int, n_workers: int) -> dict[str, str]:
+    """Environment of pool worker ``worker_id``: its render device's Vulkan restriction
+    and an equal share of the cores for lavapipe's rasteriser threads (0 = rasterise in
+    the worker's own thread, measured 10-20 % faster than one helper thread when a worker
+    has a single core)."""
+    share = available_cores() // max(1, n_workers)
+    return worker_environment(
+        config.render_device_for(worker_id), lp_threads=share if share > 1 else 0
+    )
 
 
 class Executor(ABC):
@@ -168,6 +244,11 @@ class InlineExecutor(Executor):
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[EpisodeOutcome]:
         """Yield outcomes one by one; the env cache lives for this call."""
+        if jobs:
+            # Best effort: effective only if this process has not initialised Vulkan yet
+            # (the render check of the first env says so if it had).
+            device = render_config(jobs).render_device_for(0)
+            apply_environment(worker_environment(device))
         worker = _EpisodeWorker(0)
         try:
             for job in jobs:
@@ -177,26 +258,34 @@ class InlineExecutor(Executor):
 
 
 def _quiet_worker() -> None:
-    """Limit a worker to one thread (the pool already uses every core) and hush the
-    per-process 'no CUDA render device' warning of ManiSkill."""
+    """Limit a worker to one thread (the pool already uses every core), import the envs
+    and hush ManiSkill's per-process 'no CUDA render device' warning (every worker of a
+    CPU machine would print it; a worker told to render on the GPU checks for itself)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    logging.getLogger("mani_skill").setLevel(logging.ERROR)
+    import torch
+
+    torch.set_num_threads(1)
+    import mikasa_envs  # noqa: F401  (registers the envs once per process)
+
+    # ManiSkill's logger is named "mani_skill " (trailing space) and sets its level when
+    # imported, so this has to come after the import.
+    for name in ("mani_skill ", "mani_skill"):
+        logging.getLogger(name).setLevel(logging.ERROR)
 
 
-def _worker_main(worker_id: int, inbox: Any, outbox: Any) -> None:
+def _worker_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, str]) -> None:
     """Entry point of a `LocalExecutor` worker process."""
     # Ctrl-C reaches the whole process group: the parent handles it (it stops the pool
     # and keeps what is saved); a worker dying mid-episode would only add noise.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _quiet_worker()
+    # Before anything can initialise Vulkan: the render device's driver restriction.
+    apply_environment(env_vars)
     try:
-        import torch
-
-        torch.set_num_threads(1)
-        import mikasa_envs  # noqa: F401  (registers the envs once per process)
+        _quiet_worker()
     except BaseException:
         outbox.put(("fatal", worker_id, traceback.format_exc()))
         return
+    outbox.put(("ready", worker_id, None))
     worker = _EpisodeWorker(worker_id)
     parent = mp.parent_process()
     try:
@@ -249,10 +338,12 @@ class LocalExecutor(Executor):
     name = "local"
 
     def __init__(self, workers: int | None = None) -> None:
-        n = workers if workers is not None else (os.cpu_count() or 1)
+        n = workers if workers is not None else available_cores()
         if n < 1:
             raise BenchError(f"--workers must be >= 1 for the local executor, got {n}")
         self.workers = int(n)
+        self.startup_s: float | None = None
+        """Seconds until every worker had imported the simulator (set by `run`)."""
 
     def describe(self) -> dict[str, Any]:
         """Name and worker count."""
@@ -268,12 +359,16 @@ class LocalExecutor(Executor):
         handles: list[_Handle] = []
         scheduler = _Scheduler(jobs)
         clean = False
+        config = render_config(jobs)
+        n = min(self.workers, len(jobs))
+        t_start = time.perf_counter()
+        not_ready = n
         try:
-            for wid in range(min(self.workers, len(jobs))):
+            for wid in range(n):
                 inbox = ctx.Queue()
                 p = ctx.Process(
                     target=_worker_main,
-                    args=(wid, inbox, outbox),
+                    args=(wid, inbox, outbox, worker_env_vars(config, wid, n)),
                     daemon=True,
                     name=f"mikasa-bench-worker-{wid}",
                 )
@@ -290,6 +385,11 @@ class LocalExecutor(Executor):
                     continue
                 if kind == "fatal":
                     raise BenchError(f"worker {wid} failed to start:\n{payload}")
+                if kind == "ready":
+                    not_ready -= 1
+                    if not not_ready:
+                        self.startup_s = time.perf_counter() - t_start
+                    continue
                 h = handles[wid]
                 h.job, h.last_key = None, payload.job.env_key
                 remaining -= 1
@@ -340,16 +440,34 @@ class LocalExecutor(Executor):
                 h.process.join(timeout=5)
 
 
-EXECUTORS: dict[str, type[Executor]] = {"local": LocalExecutor, "inline": InlineExecutor}
-"""Executor name -> class; a ``ray`` entry is the planned extension."""
+def _ray_executor(workers: int | None = None, address: str | None = None) -> Executor:
+    # Imported lazily: ray is an optional extra (mikasa-bench[ray]).
+    from .ray_executor import RayExecutor
+
+    return RayExecutor(workers=workers, address=address)
 
 
-def make_executor(name: str = "local", workers: int | None = None) -> Executor:
-    """Build an executor by name (``workers == 0`` selects `InlineExecutor`)."""
-    if name == "ray":
-        raise BenchError("the Ray executor is not implemented yet; use --executor local")
+EXECUTORS: dict[str, Any] = {
+    "local": LocalExecutor,
+    "inline": InlineExecutor,
+    "ray": _ray_executor,
+}
+"""Executor name -> class or factory."""
+
+
+def make_executor(
+    name: str = "local", workers: int | None = None, *, address: str | None = None
+) -> Executor:
+    """Build an executor by name (``workers == 0`` selects `InlineExecutor`; ``address``
+    is the Ray cluster to join, default: ``RAY_ADDRESS`` or a new local instance)."""
     if name not in EXECUTORS:
         raise BenchError(f"unknown executor {name!r}; expected one of {', '.join(EXECUTORS)}")
+    if address is not None and name != "ray":
+        raise BenchError("--address is only used by --executor ray")
+    if name == "ray":
+        if workers == 0:
+            raise BenchError("--workers 0 (run in this process) cannot be used with Ray")
+        return _ray_executor(workers, address)
     if name == "inline" or workers == 0:
         return InlineExecutor()
     return LocalExecutor(workers)

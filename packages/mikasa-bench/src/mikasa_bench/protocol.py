@@ -22,6 +22,7 @@ __all__ = [
     "SUPPORTED_SPLITS",
     "SUPPORTED_OBS_MODES",
     "NUM_ENVS",
+    "RENDER_DEVICES",
     "BenchmarkConfig",
     "protocol_settings",
     "package_versions",
@@ -47,6 +48,12 @@ SUPPORTED_OBS_MODES: tuple[str, ...] = ("rgb", "state")
 NUM_ENVS: int = 1
 """Each env instance simulates one episode at a time (canonical ``num_envs=1``)."""
 
+RENDER_DEVICES: tuple[str, ...] = ("auto", "cpu", "gpu")
+"""Where a worker renders its cameras. ``auto``: ManiSkill's default (a CUDA GPU if there is
+one, else the CPU); ``cpu``: Mesa's lavapipe, even on a GPU machine; ``gpu``: a CUDA GPU
+(an error if there is none). Not part of the canonical protocol, but recorded with it:
+renderers are not guaranteed to produce bit-identical pixels."""
+
 STATE_WRAPPER_CHAIN: str = (
     "mikasa_bench state chain: StateOnlyTensorToDictWrapper -> curriculum wrapper -> "
     "proprio(tcp_pose, qpos, qvel) + state -> ConvertJointsToEEFXyzRpyGripperWrapper"
@@ -60,6 +67,12 @@ class BenchmarkConfig:
 
     ``sim_backend`` defaults to ``"gpu"`` as upstream; the CLI's local executor passes
     ``"cpu"`` because each of its workers simulates a single env on the CPU.
+
+    Extensions: ``render_device`` (one of `RENDER_DEVICES`) and ``gpu_render_workers``
+    (with ``render_device="cpu"``: the first N workers of the pool render on the GPU
+    instead, a mixed pool for machines where one GPU cannot keep up with every worker).
+    ``save_videos`` records one mp4 per episode (scene view with the task's overlays beside
+    the two cameras); it only changes ``render()`` frames, never observations or results.
     """
 
     start_seed: int = START_SEED
@@ -70,6 +83,8 @@ class BenchmarkConfig:
     sim_backend: str = "gpu"
     include_overlays: bool = False
     save_videos: bool = False
+    render_device: str = "auto"
+    gpu_render_workers: int = 0
 
     def __post_init__(self) -> None:
         if self.n_episodes <= 0:
@@ -81,8 +96,32 @@ class BenchmarkConfig:
                 f"unsupported obs_mode {self.obs_mode!r}; expected one of "
                 f"{', '.join(SUPPORTED_OBS_MODES)} ('rgb' is the canonical protocol)"
             )
-        if self.save_videos:
-            raise NotImplementedError("video recording (save_videos=True) is not implemented yet")
+        if self.render_device not in RENDER_DEVICES:
+            raise ValueError(
+                f"unsupported render_device {self.render_device!r}; expected one of "
+                f"{', '.join(RENDER_DEVICES)}"
+            )
+        if self.gpu_render_workers < 0:
+            raise ValueError(f"gpu_render_workers must be >= 0, got {self.gpu_render_workers}")
+        if self.gpu_render_workers and self.render_device != "cpu":
+            # A mixed pool is "CPU rendering, except N workers": with auto/gpu every worker
+            # already renders on the GPU when there is one, so N would mean nothing.
+            raise ValueError(
+                "gpu_render_workers (a mixed pool) needs render_device='cpu': the first N "
+                "workers render on the GPU, the others on the CPU"
+            )
+
+    def render_device_for(self, worker_index: int) -> str:
+        """The render device (``auto``, ``cpu`` or ``gpu``) of worker ``worker_index``."""
+        if self.gpu_render_workers and worker_index < self.gpu_render_workers:
+            return "gpu"
+        return self.render_device
+
+    def render_description(self) -> str:
+        """Human-readable render setting, e.g. ``cpu`` or ``mixed: 2 workers gpu, rest cpu``."""
+        if self.gpu_render_workers:
+            return f"mixed: {self.gpu_render_workers} worker(s) gpu, the rest cpu"
+        return self.render_device
 
     def episode_seeds(self) -> list[int]:
         """The seed of every episode, in episode order."""
@@ -130,6 +169,8 @@ def protocol_settings(config: BenchmarkConfig) -> dict[str, Any]:
         "include_overlays": config.include_overlays,
         "num_envs": NUM_ENVS,
         "sim_backend": config.sim_backend,
+        "render_device": config.render_description(),
+        "save_videos": config.save_videos,
         "policy_reset": "policy.reset() (if defined) at every episode start",
         "policy_rng_seed": "python/numpy/torch global RNGs seeded with the episode seed",
         "canonical": not devs,

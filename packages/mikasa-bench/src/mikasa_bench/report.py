@@ -5,6 +5,8 @@ success rate (with Wilson 95 % intervals), mean return and episode length per ta
 means per split and per memory type, and three plots (success by memory type and split,
 per-task success bars, episode lengths). The Markdown file references PNGs in
 ``report_assets/``; the HTML file embeds the same PNGs as base64 and needs nothing else.
+Runs recorded with ``--video`` get a Videos section linking each episode's mp4 (relative
+links: they work as long as the report stays next to the run directories).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import base64
 import html
 import io
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -306,6 +309,8 @@ def _run_info(run: RunData) -> list[tuple[str, str]]:
         canon = "yes" if proto.get("canonical") else "no: " + "; ".join(proto.get("deviations", []))
         info.append(("canonical protocol", canon))
         info.append(("sim backend", str(proto.get("sim_backend"))))
+        if proto.get("render_device"):
+            info.append(("render device", str(proto["render_device"])))
     sel = s.get("selection") or {}
     if sel.get("skipped_unregistered"):
         info.append(("skipped (not registered)", ", ".join(sel["skipped_unregistered"])))
@@ -375,6 +380,27 @@ def _agg_rows(runs: Sequence[RunData]) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def _video_rows(
+    runs: Sequence[RunData], out_dir: Path
+) -> list[tuple[str, str, list[tuple[str, str]]]]:
+    """``(env_id, policy, [(episode label, link relative to out_dir)])`` for every task
+    result that lists videos; links to files that do not exist are left out."""
+    rows = []
+    for env_id in _task_order(runs):
+        for run in runs:
+            r = _by_id(run).get(env_id)
+            if r is None or not r.get("videos"):
+                continue
+            links = []
+            for i, rel in enumerate(r["videos"]):
+                if rel and (run.run_dir / rel).is_file():
+                    link = os.path.relpath(run.run_dir / rel, out_dir).replace(os.sep, "/")
+                    links.append((str(i), link))
+            if links:
+                rows.append((env_id, run.label, links))
+    return rows
+
+
 def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     esc = [[str(c).replace("|", "\\|") for c in r] for r in rows]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
@@ -389,7 +415,12 @@ _CAPTIONS = {
 }
 
 
-def _markdown(runs: Sequence[RunData], title: str, assets: str) -> str:
+def _markdown(
+    runs: Sequence[RunData],
+    title: str,
+    assets: str,
+    videos: Sequence[tuple[str, str, list[tuple[str, str]]]] = (),
+) -> str:
     parts = [f"# {title}", ""]
     for run in runs:
         if len(runs) > 1:
@@ -410,6 +441,20 @@ def _markdown(runs: Sequence[RunData], title: str, assets: str) -> str:
     ]
     for name, caption in _CAPTIONS.items():
         parts += [f"![{caption}]({assets}/{name})", ""]
+    if videos:
+        rows = [
+            [env_id, label, " ".join(f"[{n}](<{link}>)" for n, link in links)]
+            for env_id, label, links in videos
+        ]
+        parts += [
+            "## Videos",
+            "",
+            "Scene view with the task's overlays beside the top and wrist cameras; one mp4 "
+            "per episode.",
+            "",
+            _md_table(["Task", "Policy", "Episodes"], rows),
+            "",
+        ]
     parts.append(
         "SR: fraction of episodes with `success_once`; CI: Wilson score interval. "
         "Split and memory-type rows average task SRs. Mean return is a debug metric."
@@ -442,7 +487,12 @@ def _html_table(header: Sequence[str], rows: Sequence[Sequence[str]], num_from: 
     return f"<table>{head}{body}</table>"
 
 
-def _html(runs: Sequence[RunData], title: str, images: dict[str, bytes]) -> str:
+def _html(
+    runs: Sequence[RunData],
+    title: str,
+    images: dict[str, bytes],
+    videos: Sequence[tuple[str, str, list[tuple[str, str]]]] = (),
+) -> str:
     parts = [
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
         f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
@@ -461,6 +511,19 @@ def _html(runs: Sequence[RunData], title: str, images: dict[str, bytes]) -> str:
             f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{b64}'>"
             f"<figcaption class='note'>{html.escape(caption)}</figcaption></figure>"
         )
+    if videos:
+        # Links, not embedded <video>s: a canonical run has thousands of episodes.
+        parts.append("<h2>Videos</h2><table><tr><th>Task</th><th>Policy</th><th>Episodes</th></tr>")
+        for env_id, label, links in videos:
+            cells = " ".join(
+                f"<a href='{html.escape(link, quote=True)}'>{html.escape(n)}</a>"
+                for n, link in links
+            )
+            parts.append(
+                f"<tr><td>{html.escape(env_id)}</td><td>{html.escape(label)}</td>"
+                f"<td>{cells}</td></tr>"
+            )
+        parts.append("</table>")
     parts.append(
         "<p class='note'>SR: fraction of episodes with success_once; CI: Wilson score "
         "interval. Split and memory-type rows average task SRs. Mean return is a debug "
@@ -488,6 +551,7 @@ def write_report(
     for name, data in images.items():
         _atomic_write_bytes(out / ASSETS_DIR / name, data)
     md_path, html_path = out / REPORT_MD, out / REPORT_HTML
-    _atomic_write_bytes(md_path, _markdown(runs, title, ASSETS_DIR).encode("utf-8"))
-    _atomic_write_bytes(html_path, _html(runs, title, images).encode("utf-8"))
+    videos = _video_rows(runs, out)
+    _atomic_write_bytes(md_path, _markdown(runs, title, ASSETS_DIR, videos).encode("utf-8"))
+    _atomic_write_bytes(html_path, _html(runs, title, images, videos).encode("utf-8"))
     return md_path, html_path

@@ -6,6 +6,8 @@ Layout of a run directory::
     <run_dir>/summary.json         summary of the finished tasks (§7.2 keys, then extensions)
     <run_dir>/meta/run.json        what the run is: tasks, policy, protocol, sessions
     <run_dir>/meta/episodes.jsonl  journal: one line per finished episode (fsync'ed)
+    <run_dir>/videos/<env_id>/episode_<i:04d>.mp4   with ``save_videos`` (written before
+                                   the episode's journal line)
 
 Every JSON file is replaced atomically (temp file + ``os.replace``), so a reader never
 sees half a file. The journal makes ``--resume`` lossless even after ``kill -9``: episodes
@@ -67,6 +69,15 @@ def _json_safe(x: Any) -> Any:
     return x
 
 
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _current_umask()
+
+
 def _atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` via a temp file in the same directory, fsync, then ``os.replace``:
     readers (and a crash at any point) see the old file or the new one, never a mix."""
@@ -75,6 +86,9 @@ def _atomic_write_bytes(path: str | Path, data: bytes) -> None:
     # The temp name starts with '.' and ends in '.tmp': globs for *.json never see it.
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        # mkstemp creates 0600; results and videos get the usual umask-based mode so
+        # others can read a shared results directory.
+        os.fchmod(fd, 0o666 & ~_UMASK)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
@@ -104,9 +118,11 @@ def build_task_result(
     model: Mapping[str, Any] | None = None,
     commit: str | None = None,
     wall_time_s: float | None = None,
+    videos: Sequence[str | None] | None = None,
 ) -> dict[str, Any]:
     """The per-task result dict: the keys of benchmark.md §7.1 in order, then extensions
-    (``sr_ci95``, ``mean_episode_length``, the remaining protocol settings, wall time)."""
+    (``sr_ci95``, ``mean_episode_length``, the remaining protocol settings, wall time and,
+    with videos, each episode's video path relative to the run directory)."""
     if len(episodes) != config.n_episodes:
         raise ValueError(f"{task.env_id}: {len(episodes)} episodes, expected {config.n_episodes}")
     successes = [bool(e.success_once) for e in episodes]
@@ -115,7 +131,7 @@ def build_task_result(
     n = len(successes)
     lo, hi = wilson_interval(sum(successes), n)
     settings = protocol_settings(config)
-    return {
+    out = {
         "env_id": task.env_id,
         "split": task.split.title(),
         "memory_type": task.memory_type,
@@ -140,9 +156,13 @@ def build_task_result(
         "sim_backend": config.sim_backend,
         "include_overlays": config.include_overlays,
         "num_envs": NUM_ENVS,
+        "render_device": settings["render_device"],
         "canonical": settings["canonical"],
         "wall_time_s": wall_time_s,
     }
+    if videos is not None:
+        out["videos"] = list(videos)
+    return out
 
 
 def build_summary(results: Sequence[Mapping[str, Any]], **extensions: Any) -> dict[str, Any]:
@@ -360,13 +380,15 @@ class RunStore:
             len(v) for v in self.partial.values()
         )
 
-    def begin_session(self) -> None:
-        """Start timing this process's share of the run."""
+    def begin_session(self, execution: Mapping[str, Any] | None = None) -> None:
+        """Start timing this process's share of the run; ``execution`` (the executor's
+        description: name, workers, Ray address) is recorded with the session."""
         prior = sum(float(s.get("wall_time_s", 0.0)) for s in self.meta.get("sessions", []))
         self._session = _Session(_now(), time.perf_counter(), prior)
-        self.meta.setdefault("sessions", []).append(
-            {"started": self._session.started, "wall_time_s": 0.0}
-        )
+        record: dict[str, Any] = {"started": self._session.started, "wall_time_s": 0.0}
+        if execution is not None:
+            record["execution"] = dict(execution)
+        self.meta.setdefault("sessions", []).append(record)
 
     def wall_time_s(self) -> float:
         """Wall time of all sessions so far, this one included."""
@@ -381,6 +403,19 @@ class RunStore:
         atomic_write_json(self.meta_dir / RUN_META_FILENAME, self.meta)
 
     # -- recording -----------------------------------------------------------------
+    def save_video(self, env_id: str, episode: int, data: bytes) -> str:
+        """Write an episode's mp4 atomically; returns its path relative to the run dir.
+
+        Called before the episode is journalled: an episode that was recorded always has
+        its video; a video without a journal line (crash in between) is simply replaced
+        when ``--resume`` reruns the episode.
+        """
+        from .video import video_relpath
+
+        rel = video_relpath(env_id, episode)
+        _atomic_write_bytes(self.run_dir / rel, data)
+        return rel
+
     def record_episode(
         self,
         env_id: str,
@@ -389,9 +424,12 @@ class RunStore:
         *,
         action_chunk_size: int,
         wall_s: float,
+        video: str | None = None,
+        render: str | None = None,
     ) -> dict[str, Any] | None:
         """Journal one finished episode; when it completes its task, write the task file
-        and the summary and return the task result (else None)."""
+        and the summary and return the task result (else None). ``video``: its path
+        relative to the run dir; ``render``: where the worker rendered."""
         if env_id in self.finished or episode in self.partial.get(env_id, {}):
             raise RuntimeError(f"episode {episode} of {env_id} recorded twice")
         rec = {
@@ -404,6 +442,10 @@ class RunStore:
             "action_chunk_size": int(action_chunk_size),
             "wall_s": float(wall_s),
         }
+        if video is not None:
+            rec["video"] = video
+        if render is not None:
+            rec["render"] = render
         with open(self.journal_path, "a", encoding="utf-8") as f:
             f.write(json.dumps(rec) + "\n")
             f.flush()
@@ -429,6 +471,7 @@ class RunStore:
             model=self.meta["model"],
             commit=self.commit,
             wall_time_s=sum(r["wall_s"] for r in recs),
+            videos=[r.get("video") for r in recs] if self.config.save_videos else None,
         )
         atomic_write_json(self.run_dir / f"{env_id}.json", result)
         self.finished[env_id] = result

@@ -22,7 +22,13 @@ from .errors import EpisodeFailedError
 from .executor import EpisodeJob, Executor
 from .policies import policy_chunk_size
 from .protocol import BenchmarkConfig, package_versions, protocol_settings
-from .results import RunStore, build_summary, build_task_result, write_benchmark_results
+from .results import (
+    RunStore,
+    _atomic_write_bytes,
+    build_summary,
+    build_task_result,
+    write_benchmark_results,
+)
 from .tasks import BenchmarkTask, benchmark_commit
 
 __all__ = ["execute_runs", "evaluate_task", "evaluate_benchmark"]
@@ -76,8 +82,9 @@ def execute_runs(
     jobs = _jobs_for(stores)
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
     done = sum(s.n_done_episodes for s in stores)
+    execution = executor.describe()
     for store in stores:
-        store.begin_session()
+        store.begin_session(execution)
     multi = len(stores) > 1
     bar = _progress_bar(total, done, progress, stream)
     try:
@@ -92,12 +99,18 @@ def execute_runs(
                 job = outcome.job
                 store = stores[job.run_index]
                 assert outcome.result is not None
+                video = None
+                if outcome.video is not None:
+                    # Before the journal line: a recorded episode always has its video.
+                    video = store.save_video(job.task.env_id, job.episode, outcome.video)
                 finished = store.record_episode(
                     job.task.env_id,
                     job.episode,
                     outcome.result,
                     action_chunk_size=outcome.action_chunk_size,
                     wall_s=outcome.wall_s,
+                    video=video,
+                    render=outcome.render,
                 )
                 bar.update(1)
                 if finished is not None:
@@ -138,15 +151,24 @@ def evaluate_task(
     env_factory: Callable[[str, BenchmarkConfig], Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluate ``policy`` (an object, in this process) on one task; returns the task
-    result dict. ``env_factory`` replaces `make_benchmark_env` (tests, custom envs)."""
-    if video_dir is not None:
-        raise NotImplementedError("video recording is not implemented yet")
+    result dict. ``env_factory`` replaces `make_benchmark_env` (tests, custom envs).
+
+    ``video_dir``: write ``episode_<i:04d>.mp4`` per episode there (benchmark.md §8); the
+    env should be made with ``save_videos=True`` (scene view with overlays)."""
     chunk = policy_chunk_size(policy)
     env = (env_factory or make_benchmark_env)(task.env_id, config)
     try:
         episodes = []
         for i, seed in enumerate(config.episode_seeds()):
-            result, _ = run_episode(env, policy, seed)
+            if video_dir is not None:
+                from .video import EpisodeVideo
+
+                with EpisodeVideo() as recorder:
+                    result, _ = run_episode(env, policy, seed, frame_sink=recorder.add)
+                    data = recorder.finish()
+                _atomic_write_bytes(Path(video_dir) / f"episode_{i:04d}.mp4", data)
+            else:
+                result, _ = run_episode(env, policy, seed)
             episodes.append(result)
             if episode_callback is not None:
                 episode_callback(i, result)
@@ -195,12 +217,18 @@ def evaluate_benchmark(
             progress(f"[{idx}/{n}] {task.env_id}  ({config.n_episodes} episodes)")
         if task_start_callback is not None:
             task_start_callback(idx - 1, task)
+        video_dir = (
+            Path(output_dir) / "videos" / task.env_id
+            if config.save_videos and output_dir is not None
+            else None
+        )
         result = evaluate_task(
             task,
             policy,
             config,
             model=model,
             commit=commit,
+            video_dir=video_dir,
             episode_callback=episode_callback,
             env_factory=env_factory,
         )

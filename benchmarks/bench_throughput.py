@@ -1,0 +1,447 @@
+"""Evaluation throughput: the serial reference loop vs the parallel runner of mikasa-bench.
+
+Runs the same tasks and episodes with the zero policy twice and compares env-steps/s:
+
+* **serial**: one env in one process, a plain loop over tasks and episodes like the
+  reference runner (``make_benchmark_env`` + ``run_episode``), in a fresh interpreter, with
+  ManiSkill's default render device (``--serial-render-device``);
+* **parallel**: `execute_runs` (journal, result files) on the local process pool (or Ray)
+  with ``--workers`` workers rendering where ``--render-device`` says.
+
+Two rates are reported for each. *End to end*: all steps over the whole wall time,
+including worker start (imports) and env builds; this is what a short run sees. *Steady
+state*: steps over the time spent stepping, i.e. without process start and env builds (the
+first, shader-compiling build of a process costs 10-20 s on lavapipe); this is what a long
+run converges to, and the projection for the full canonical run (every manifest task, 50
+episodes each, full horizons) uses it plus the measured start-up. The per-episode results
+of both modes must be identical (zero policy, same seeds).
+
+    python benchmarks/bench_throughput.py                       # rgb, workers = cores
+    python benchmarks/bench_throughput.py --workers 16 --render-device cpu --json out.json
+    python benchmarks/bench_throughput.py --workers 16 --render-device cpu --gpu-render-workers 2
+    python benchmarks/bench_throughput.py --obs-mode state --tasks RememberColor3-VLA-v0
+
+Targets (steady-state ratio): >= 1.8x with 2 workers on a 2-core machine, >= 12x with 16
+workers on a 16-core GPU machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+DEFAULT_TASKS = ("RememberColor3-VLA-v0", "FindImposterColor3-VLA-v0", "RememberShape3-VLA-v0")
+TARGETS = {2: 1.8, 16: 12.0}
+"""Workers -> required steady-state speed-up over the serial loop."""
+FULL_RUN_EPISODES = 50
+
+
+# ------------------------------------------------------------------------------------
+# serial reference loop (runs in a child interpreter)
+# ------------------------------------------------------------------------------------
+
+
+def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
+    """The reference runner's loop: one env per task, episodes in order, in this process."""
+    t_start = time.perf_counter()
+    import logging
+
+    import mikasa_envs  # noqa: F401  (torch, ManiSkill, the envs: as the workers at start)
+
+    logging.getLogger("mani_skill ").setLevel(logging.ERROR)  # ManiSkill's logger name
+    from mikasa_bench.episode import make_benchmark_env, run_episode
+    from mikasa_bench.policies import ZeroPolicy
+    from mikasa_bench.protocol import BenchmarkConfig
+    from mikasa_bench.render import check_render_device
+
+    import_s = time.perf_counter() - t_start
+    config = BenchmarkConfig(
+        n_episodes=spec["episodes"],
+        obs_mode=spec["obs_mode"],
+        sim_backend="cpu",
+        render_device=spec["render_device"],
+    )
+    policy = ZeroPolicy()
+    episodes, make_s, render = [], 0.0, None
+    t0 = time.perf_counter()
+    for env_id in spec["tasks"]:
+        tm = time.perf_counter()
+        env = make_benchmark_env(env_id, config)
+        make_s += time.perf_counter() - tm
+        render = render or check_render_device(env, spec["render_device"])
+        try:
+            for i, seed in enumerate(config.episode_seeds()):
+                te = time.perf_counter()
+                r, _ = run_episode(env, policy, seed)
+                episodes.append(_episode_record(env_id, i, r, time.perf_counter() - te))
+        finally:
+            env.close()
+    loop_s = time.perf_counter() - t0
+    return {
+        "import_s": import_s,
+        "loop_s": loop_s,
+        "env_build_s": make_s,
+        "render": render,
+        "lp_num_threads": os.environ.get("LP_NUM_THREADS", "default (all cores)"),
+        "episodes": episodes,
+    }
+
+
+def _episode_record(env_id: str, i: int, r: Any, wall_s: float, **extra: Any) -> dict[str, Any]:
+    return {
+        "env_id": env_id,
+        "episode": i,
+        "seed": r.seed,
+        "success_once": r.success_once,
+        "episode_return": r.episode_return,
+        "n_steps": r.n_steps,
+        "wall_s": wall_s,
+        **extra,
+    }
+
+
+def run_serial(spec: dict[str, Any]) -> dict[str, Any]:
+    """Run `serial_child` in a fresh interpreter (no state shared with the parent)."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, __file__, "--_serial-child", json.dumps(spec)],
+        capture_output=True,
+        text=True,
+    )
+    if proc.returncode != 0:
+        raise SystemExit(f"serial run failed:\n{proc.stderr[-4000:]}")
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))
+    out = json.loads(line[len("RESULT") :])
+    out["process_wall_s"] = time.perf_counter() - t0
+    return out
+
+
+# ------------------------------------------------------------------------------------
+# parallel runner
+# ------------------------------------------------------------------------------------
+
+
+def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
+    """`execute_runs` on a fresh run directory with the chosen executor; every outcome is
+    recorded on the way through."""
+    from mikasa_bench.executor import EpisodeOutcome, Executor, make_executor
+    from mikasa_bench.policies import resolve_policy
+    from mikasa_bench.protocol import BenchmarkConfig
+    from mikasa_bench.results import RunStore
+    from mikasa_bench.runner import execute_runs
+    from mikasa_bench.tasks import resolve_tasks
+
+    class Recording(Executor):
+        """Passes jobs through and keeps each outcome with its arrival time."""
+
+        def __init__(self, inner: Executor) -> None:
+            self.inner = inner
+            self.name = inner.name
+            self.outcomes: list[tuple[float, EpisodeOutcome]] = []
+
+        def describe(self) -> dict[str, Any]:
+            return self.inner.describe()
+
+        def run(self, jobs: Sequence[Any]) -> Iterator[EpisodeOutcome]:
+            for outcome in self.inner.run(jobs):
+                self.outcomes.append((time.perf_counter(), outcome))
+                yield outcome
+
+    config = BenchmarkConfig(
+        n_episodes=spec["episodes"],
+        obs_mode=spec["obs_mode"],
+        sim_backend="cpu",
+        render_device=args.render_device,
+        gpu_render_workers=args.gpu_render_workers,
+    )
+    selection = resolve_tasks(env_ids=list(spec["tasks"]))
+    tmp = Path(tempfile.mkdtemp(prefix="bench_throughput_"))
+    try:
+        store = RunStore.create(
+            tmp / "run",
+            tasks=selection.tasks,
+            policy=resolve_policy("zero"),
+            config=config,
+            selection=selection.to_dict(),
+            commit=None,
+        )
+        executor = Recording(make_executor(args.executor, args.workers, address=args.address))
+        t0 = time.perf_counter()
+        execute_runs([store], executor, progress=False)
+        wall_s = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    episodes = [
+        _episode_record(
+            o.job.task.env_id,
+            o.job.episode,
+            o.result,
+            o.wall_s,
+            worker=o.worker,
+            setup_s=o.setup_s,
+            render=o.render,
+            done_at_s=t - t0,
+        )
+        for t, o in executor.outcomes
+    ]
+    episodes.sort(key=lambda e: (spec["tasks"].index(e["env_id"]), e["episode"]))
+    return {
+        "wall_s": wall_s,
+        "startup_s": getattr(executor.inner, "startup_s", None),
+        "executor": executor.describe(),
+        "render": sorted({e["render"] for e in episodes if e["render"]}),
+        "episodes": episodes,
+    }
+
+
+# ------------------------------------------------------------------------------------
+# figures
+# ------------------------------------------------------------------------------------
+
+
+def machine_info() -> dict[str, Any]:
+    """Cores, CPU model, GPUs and package versions: what the numbers depend on."""
+    from mikasa_bench.executor import available_cores
+    from mikasa_bench.protocol import package_versions
+
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    gpus: list[str] = []
+    if shutil.which("nvidia-smi"):
+        try:
+            out = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, timeout=20)
+            gpus = [x for x in out.stdout.splitlines() if x.strip()]
+        except (OSError, subprocess.SubprocessError):
+            pass
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    versions = package_versions()
+    return {
+        "host": platform.node(),
+        "cores_available": available_cores(),
+        "cpu_count": os.cpu_count(),
+        "cpu_model": cpu,
+        "gpus": gpus,
+        "load_average_at_start": load,
+        "versions": {k: versions.get(k) for k in ("python", "mani-skill", "sapien", "torch")},
+    }
+
+
+def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict[str, float]:
+    """End-to-end and steady-state steps/s.
+
+    Steady state: per worker, its steps over the time its episodes took without env
+    builds; summed over workers (they run concurrently). For the serial loop this is its
+    steps over the loop time minus env builds.
+    """
+    steps = sum(e["n_steps"] for e in episodes)
+    by_worker: dict[Any, list[dict[str, Any]]] = {}
+    for e in episodes:
+        by_worker.setdefault(e.get("worker", 0), []).append(e)
+    if len(by_worker) == 1 and "worker" not in episodes[0]:
+        steady = steps / max(1e-9, wall_s - setup_s)
+    else:
+        steady = 0.0
+        for eps in by_worker.values():
+            busy = sum(e["wall_s"] - e.get("setup_s", 0.0) for e in eps)
+            steady += sum(e["n_steps"] for e in eps) / max(1e-9, busy)
+    return {"steps": steps, "end_to_end_steps_per_s": steps / wall_s, "steady_steps_per_s": steady}
+
+
+def full_run_steps() -> tuple[int, int]:
+    """(tasks, env steps) of the full canonical run: every manifest task, 50 episodes, at
+    the manifest's full horizons (episodes of a failing policy run to the horizon)."""
+    from mikasa_bench.tasks import select_benchmark_tasks
+
+    tasks = select_benchmark_tasks(split="all")
+    return len(tasks), FULL_RUN_EPISODES * sum(t.max_episode_steps for t in tasks)
+
+
+def _hms(seconds: float) -> str:
+    h, rem = divmod(int(round(seconds)), 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m{s:02d}s"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse arguments, run both modes, print the comparison, optionally write JSON."""
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--obs-mode", choices=("rgb", "state"), default="rgb")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="episodes per task (default: enough for ~4 episodes per worker, at least 2)",
+    )
+    p.add_argument("--tasks", nargs="+", default=list(DEFAULT_TASKS), metavar="ENV_ID")
+    p.add_argument("--render-device", choices=("auto", "cpu", "gpu"), default="auto")
+    p.add_argument(
+        "--gpu-render-workers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="mixed pool (with --render-device cpu): N workers render on the GPU",
+    )
+    p.add_argument(
+        "--serial-render-device",
+        choices=("auto", "cpu", "gpu"),
+        default="auto",
+        help="render device of the serial loop (default auto: ManiSkill's default, as the "
+        "reference runner)",
+    )
+    p.add_argument("--executor", choices=("local", "ray"), default="local")
+    p.add_argument("--address", default=None, help="Ray cluster address (--executor ray)")
+    p.add_argument("--skip-serial", action="store_true", help="only the parallel runner")
+    p.add_argument("--json", default=None, metavar="PATH", help="write every figure here")
+    p.add_argument("--_serial-child", default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+
+    if args._serial_child is not None:
+        print("RESULT" + json.dumps(serial_child(json.loads(args._serial_child))), flush=True)
+        return 0
+
+    from mikasa_bench.executor import available_cores
+
+    workers = args.workers or available_cores()
+    args.workers = workers
+    episodes = args.episodes or max(2, math.ceil(4 * workers / len(args.tasks)))
+    spec = {
+        "tasks": list(args.tasks),
+        "episodes": episodes,
+        "obs_mode": args.obs_mode,
+        "render_device": args.serial_render_device,
+    }
+    info = machine_info()
+    n_full_tasks, n_full_steps = full_run_steps()
+    print(
+        f"machine: {info['cores_available']} cores available ({info['cpu_model']}); "
+        f"GPUs: {', '.join(info['gpus']) or 'none'}; load average at start: "
+        f"{', '.join(f'{x:.2f}' for x in info['load_average_at_start'] or [])}"
+    )
+    print(
+        f"workload: {len(args.tasks)} task(s) x {episodes} episodes, zero policy, "
+        f"obs {args.obs_mode}: {', '.join(args.tasks)}"
+    )
+    render_desc = args.render_device + (
+        f" ({args.gpu_render_workers} gpu workers)" if args.gpu_render_workers else ""
+    )
+    print(
+        f"parallel: {args.executor} executor, {workers} workers, render {render_desc}; "
+        f"serial: 1 process, render {args.serial_render_device}\n",
+        flush=True,
+    )
+
+    serial = None
+    if not args.skip_serial:
+        print("serial loop ...", flush=True)
+        serial = run_serial(spec)
+        serial["rates"] = rates(serial["episodes"], serial["loop_s"], serial["env_build_s"])
+        r = serial["rates"]
+        print(
+            f"  {r['steps']} steps in {serial['loop_s']:.1f} s (+{serial['import_s']:.1f} s "
+            f"imports; env builds {serial['env_build_s']:.1f} s); render {serial['render']}, "
+            f"LP_NUM_THREADS {serial['lp_num_threads']}\n"
+            f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
+            f"{r['steady_steps_per_s']:.1f} steps/s",
+            flush=True,
+        )
+
+    print(f"parallel runner ({workers} workers) ...", flush=True)
+    par = run_parallel(spec, args)
+    setup = sum(e["setup_s"] for e in par["episodes"])
+    par["rates"] = rates(par["episodes"], par["wall_s"], setup)
+    r = par["rates"]
+    startup = par["startup_s"]
+    print(
+        f"  {r['steps']} steps in {par['wall_s']:.1f} s (worker start "
+        f"{startup if startup is None else f'{startup:.1f}'} s; env builds {setup:.1f} s "
+        f"summed over workers); render {', '.join(par['render'])}\n"
+        f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
+        f"{r['steady_steps_per_s']:.1f} steps/s",
+        flush=True,
+    )
+
+    out: dict[str, Any] = {
+        "machine": info,
+        "workload": {**spec, "workers": workers, "executor": args.executor},
+        "parallel_render_device": render_desc,
+        "serial": serial,
+        "parallel": par,
+    }
+    print()
+    if serial is not None:
+        key = lambda e: (e["env_id"], e["episode"])  # noqa: E731
+        fields = ("seed", "success_once", "episode_return", "n_steps")
+        a = {key(e): [e[f] for f in fields] for e in serial["episodes"]}
+        b = {key(e): [e[f] for f in fields] for e in par["episodes"]}
+        identical = a == b
+        ratio_e2e = (
+            par["rates"]["end_to_end_steps_per_s"] / serial["rates"]["end_to_end_steps_per_s"]
+        )
+        ratio_steady = par["rates"]["steady_steps_per_s"] / serial["rates"]["steady_steps_per_s"]
+        target = TARGETS.get(workers)
+        out["comparison"] = {
+            "per_episode_results_identical": identical,
+            "speedup_end_to_end": ratio_e2e,
+            "speedup_steady_state": ratio_steady,
+            "target_speedup": target,
+            "target_met": None if target is None else ratio_steady >= target,
+        }
+        print(f"per-episode results identical (serial vs parallel): {'yes' if identical else 'NO'}")
+        print(f"speed-up, end to end:  {ratio_e2e:.2f}x")
+        line = f"speed-up, steady state: {ratio_steady:.2f}x"
+        if target is not None:
+            line += f"  (target >= {target}x with {workers} workers: "
+            line += "met)" if ratio_steady >= target else "NOT met)"
+        print(line)
+    steady = par["rates"]["steady_steps_per_s"]
+    per_task_builds = setup / max(1, len(args.tasks))  # all workers' builds of one task
+    projected = (startup or 0.0) + n_full_steps / steady + n_full_tasks * per_task_builds / workers
+    out["projection"] = {
+        "full_run_tasks": n_full_tasks,
+        "full_run_episodes_per_task": FULL_RUN_EPISODES,
+        "full_run_steps": n_full_steps,
+        "parallel_steady_steps_per_s": steady,
+        "projected_wall_s": projected,
+        "note": "start-up + steps / steady rate + every worker building every task's env "
+        "once; assumes the measured tasks' per-step cost",
+    }
+    print(
+        f"projected full canonical run ({n_full_tasks} tasks x {FULL_RUN_EPISODES} episodes, "
+        f"{n_full_steps / 1e6:.2f} M steps) at {steady:.1f} steps/s: {_hms(projected)} "
+        f"({projected / 3600:.1f} h)"
+    )
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(json.dumps(out, indent=2) + "\n")
+        tmp.replace(path)
+        print(f"figures written to {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
