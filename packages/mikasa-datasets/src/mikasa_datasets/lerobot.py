@@ -237,6 +237,13 @@ def write_lerobot(
     )
     last_task = default_task
     n_eps = n_frames = 0
+    import datasets
+
+    # lerobot turns every episode into a datasets.Dataset and maps over it; with caching on,
+    # datasets fingerprints each step by pickling the transform (~8% of the conversion).
+    # Nothing here is ever reloaded from datasets' cache, so random fingerprints suffice.
+    caching = datasets.is_caching_enabled()
+    datasets.disable_caching()
     try:
         # lerobot's histogram stats cast the bool next.* columns to uint8 and warn each time.
         warnings.filterwarnings(
@@ -272,6 +279,8 @@ def write_lerobot(
         # Parquet footers are written here; without it nothing is loadable. On an error
         # the staging directory is discarded by the caller anyway.
         dataset.finalize()
+        if caching:
+            datasets.enable_caching()
     if source_metadata is not None and Path(source_metadata).is_file():
         shutil.copyfile(source_metadata, Path(root) / SOURCE_METADATA_NAME)
     return n_eps, n_frames

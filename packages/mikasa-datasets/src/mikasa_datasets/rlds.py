@@ -35,9 +35,9 @@ Feature spec (spec §6.3, one RLDS episode per NPZ file)::
 has set exactly at the last step, so they equal the spec's ``t == T-1``); together with
 the metadata this makes NPZ -> RLDS -> NPZ exact, field for field.
 
-Images are PNG-encoded here (numpy + zlib, "Up" filter, compression level 1) and handed
-to TFDS as bytes: 2-3x faster than TFDS' own TF-graph encoder, lossless, standard PNG that
-``tf.image.decode_png`` reads. Encoding of upcoming episodes runs in a thread pool while
+Images are PNG-encoded here (numpy + zlib: "Sub" filter, run-length strategy) and handed to
+TFDS as bytes: several times faster than TFDS' own TF-graph encoder, lossless, standard PNG
+that ``tf.image.decode_png`` reads. Encoding of upcoming episodes runs in a thread pool while
 TFDS serialises the current one (zlib releases the GIL).
 """
 
@@ -174,21 +174,28 @@ def rlds_features() -> Any:
 
 
 # --------------------------------------------------------------------------- PNG
-def encode_png(image: np.ndarray, level: int = 1) -> bytes:
+def encode_png(image: np.ndarray) -> bytes:
     """Encode an (H, W, 3) uint8 image as an 8-bit RGB PNG (lossless).
 
-    Every row uses the PNG "Up" filter (difference to the row above), which helps zlib on
-    rendered scenes; level 1 keeps encoding cheap (files ~15% larger than level 6).
+    Every row uses the PNG "Sub" filter (difference to the pixel on the left) and zlib's
+    run-length strategy. On rendered MIKASA frames that is ~2x faster than zlib level 1
+    with the "Up" filter and gives smaller files (measured: 0.5 vs 0.9-1.1 ms, 25-28 vs
+    31-37 KB per 128x128 image); PNG encoding is the bulk of NPZ -> RLDS time.
     """
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) uint8 image, got {image.shape} {image.dtype}")
     h, w, _ = image.shape
-    rows = image.reshape(h, w * 3)
     raw = np.empty((h, w * 3 + 1), dtype=np.uint8)
-    raw[:, 0] = 2  # filter type "Up"
-    raw[0, 0] = 0  # first row: no row above, store as is ("None")
-    raw[0, 1:] = rows[0]
-    np.subtract(rows[1:], rows[:-1], out=raw[1:, 1:])  # uint8 wrap-around == PNG's mod 256
+    raw[:, 0] = 1  # filter type "Sub"
+    # (h, w, 3) view of the pixel bytes of each row, so a channel slice of the 6-channel
+    # NPZ frame is filtered straight from its strided memory without a contiguous copy.
+    pixels = np.lib.stride_tricks.as_strided(raw[:, 1:], shape=(h, w, 3), strides=(w * 3 + 1, 3, 1))
+    pixels[:, 0] = image[:, 0]  # the first pixel has no left neighbour
+    np.subtract(
+        image[:, 1:], image[:, :-1], out=pixels[:, 1:]
+    )  # uint8 wrap-around == PNG's mod 256
+    compressor = zlib.compressobj(1, zlib.DEFLATED, 15, 9, zlib.Z_RLE)
+    idat = compressor.compress(raw.tobytes()) + compressor.flush()
 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return (
@@ -196,12 +203,7 @@ def encode_png(image: np.ndarray, level: int = 1) -> bytes:
         )
 
     header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8-bit, truecolour, no interlace
-    return (
-        _PNG_SIGNATURE
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(raw.tobytes(), level))
-        + chunk(b"IEND", b"")
-    )
+    return _PNG_SIGNATURE + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
 
 
 # --------------------------------------------------------------------------- episode <-> example
@@ -219,10 +221,8 @@ def episode_to_rlds(
     return {
         "steps": {
             "observation": {
-                "image": [encode_png(np.ascontiguousarray(rgb[i, :, :, 0:3])) for i in range(t)],
-                "wrist_image": [
-                    encode_png(np.ascontiguousarray(rgb[i, :, :, 3:6])) for i in range(t)
-                ],
+                "image": [encode_png(rgb[i, :, :, 0:3]) for i in range(t)],
+                "wrist_image": [encode_png(rgb[i, :, :, 3:6]) for i in range(t)],
                 "proprio": episode["proprio"],
             },
             "action": episode["action"],
