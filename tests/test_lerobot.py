@@ -158,6 +158,23 @@ else:
         (a,), (b,) = load_episodes(npz_task)[:1], load_episodes(r.path)
         for key in a:
             assert np.array_equal(a[key], b[key]), key
+        from mikasa_datasets.validate import validate_path
+
+        assert validate_path(r.path).frames == LENGTHS[0]
+
+    def test_env_id_folder_and_version_flag(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    ) -> None:
+        """Published RLDS releases name task folders by env id (spec §8): both spellings work."""
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10])
+        r = rlds.convert_npz_to_rlds(task, tmp_path / "data_rlds")
+        r.path.parent.rename(tmp_path / "data_rlds" / ENV_ID)
+        args = ["to-lerobot", "--root", str(tmp_path), "--task", ENV_ID, "--version", "1.0.0"]
+        assert cli.main(args) == 0
+        assert f"to-lerobot {NAME}: 1 episodes, 10 frames" in capsys.readouterr().out
+        assert (tmp_path / "data_lerobot" / NAME / "meta" / "info.json").is_file()
+        assert cli.main([*args[:-1], "9.9.9", "--overwrite"]) == 1
+        assert "9.9.9: no such RLDS version directory" in capsys.readouterr().err
 
     def test_existing_output_needs_overwrite_or_resume(npz_task: Path, tmp_path: Path) -> None:
         r = lr.convert_npz_to_lerobot(npz_task, tmp_path, max_episodes=1)

@@ -18,11 +18,13 @@ skipped. Tests that need only numpy (NPZ validation, CLI plumbing) run directly 
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import importlib.util
 import json
 import os
 import re
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,9 @@ NAME = "remember_color_3_vla_v0"
 # --------------------------------------------------------------------------- the launcher
 def datasets_python() -> Path:
     """`.venv-datasets/bin/python`, creating/refreshing the environment first."""
-    lock_path = DATASETS_VENV.parent / f".{DATASETS_VENV.name}.setup.lock"
+    # In the temp dir, not the checkout: the lock file must not show up in `git status`.
+    key = hashlib.sha1(str(DATASETS_VENV).encode()).hexdigest()[:12]
+    lock_path = Path(tempfile.gettempdir()) / f"mikasa-datasets-setup-{key}.lock"
     with open(lock_path, "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # one setup at a time across xdist workers
         proc = subprocess.run(

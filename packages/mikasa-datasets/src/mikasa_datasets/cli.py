@@ -21,8 +21,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from mikasa_datasets.loaders import DatasetFormatError, MissingDependencyError, OutputExistsError
-from mikasa_datasets.naming import env_id_to_dataset_name
+from mikasa_datasets.loaders import (
+    DatasetFormatError,
+    MissingDependencyError,
+    OutputExistsError,
+    find_task_dir,
+)
 from mikasa_datasets.npz import DATA_NPZ_DIRNAME, EpisodeFormatError, list_episode_files
 
 __all__ = ["build_parser", "main"]
@@ -85,6 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="source format (default: %(default)s)",
     )
     p.add_argument("--lerobot-root", help="LeRobot root (default: <root>/data_lerobot)")
+    p.add_argument("--version", help="RLDS version directory X.Y.Z (default: the latest)")
     p.add_argument(
         "--repo-id-template",
         default="{task}",
@@ -122,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _task_dirs(args: argparse.Namespace, source_root: Path, kind: str) -> list[Path]:
     """Source task directories selected by ``--task``/``--all`` (dataset-name spelling)."""
     if args.task:
-        return [source_root / env_id_to_dataset_name(t) for t in args.task]
+        return [find_task_dir(source_root, t) for t in args.task]
     if not source_root.is_dir():
         raise DatasetFormatError(source_root, f"{kind} root does not exist")
     dirs = []
@@ -185,6 +190,10 @@ def _run_to_lerobot(args: argparse.Namespace) -> int:
             lerobot.convert_rlds_to_lerobot,
         )
     for src in _task_dirs(args, source_root, args.source):
+        if args.source == "rlds" and args.version:
+            if not (src / args.version).is_dir():
+                raise DatasetFormatError(src / args.version, "no such RLDS version directory")
+            src = src / args.version
         result = convert(
             src,
             lerobot_root,
@@ -197,7 +206,7 @@ def _run_to_lerobot(args: argparse.Namespace) -> int:
             use_videos=not args.no_videos,
             vcodec=args.vcodec,
         )
-        _report("to-lerobot", src.name, result)
+        _report("to-lerobot", result.path.name, result)
     return 0
 
 

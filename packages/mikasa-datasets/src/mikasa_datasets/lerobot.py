@@ -424,7 +424,7 @@ def convert_rlds_to_lerobot(
 
     rlds._tfds()  # import TF before lerobot's timer starts (see _convert)
     vdir = rlds.find_version_dir(rlds_task_dir)
-    task_dir = vdir.parent  # <rlds_root>/<dataset_name>/<X.Y.Z>
+    task_dir = vdir.parent  # <rlds_root>/<task>/<X.Y.Z>; <task> may be an env id (spec §8)
     info = json.loads((vdir / "dataset_info.json").read_text(encoding="utf-8"))
     total = rlds._num_examples(info)
     n = total if max_episodes is None else min(total, max_episodes)

@@ -39,6 +39,7 @@ __all__ = [
     "OutputExistsError",
     "commit_output",
     "detect_format",
+    "find_task_dir",
     "iter_episodes",
     "iter_lerobot_episodes",
     "iter_npz_episodes",
@@ -164,6 +165,20 @@ def commit_output(staging: Path, final: Path) -> Path:
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
     return final
+
+
+def find_task_dir(root: str | os.PathLike[str], task: str) -> Path:
+    """The directory of ``task`` under a dataset root, for either spelling of its name.
+
+    Local conversions name task directories by dataset name; the published releases use
+    the env id (spec §8). Tries ``root/task`` as given, then ``root/<dataset name>``;
+    returns the dataset-name path when neither exists (so errors show the local spelling).
+    """
+    root = Path(root)
+    for candidate in (root / task, root / env_id_to_dataset_name(task)):
+        if candidate.is_dir():
+            return candidate
+    return root / env_id_to_dataset_name(task)
 
 
 # --------------------------------------------------------------------------- format detection
