@@ -244,6 +244,7 @@ def write_lerobot(
     # Nothing here is ever reloaded from datasets' cache, so random fingerprints suffice.
     caching = datasets.is_caching_enabled()
     datasets.disable_caching()
+    completed = False
     try:
         # lerobot's histogram stats cast the bool next.* columns to uint8 and warn each time.
         warnings.filterwarnings(
@@ -275,12 +276,18 @@ def write_lerobot(
             n_frames += int(ep["episode_length"])
             if progress is not None:
                 progress(n_eps)
+        completed = True
     finally:
-        # Parquet footers are written here; without it nothing is loadable. On an error
-        # the staging directory is discarded by the caller anyway.
-        dataset.finalize()
         if caching:
             datasets.enable_caching()
+        # Parquet footers are written here; without it nothing is loadable. After an error
+        # (the staging directory is discarded by the caller anyway) a failure to finalize
+        # must not mask the original exception, which names the bad input.
+        try:
+            dataset.finalize()
+        except Exception:
+            if completed:
+                raise
     if source_metadata is not None and Path(source_metadata).is_file():
         shutil.copyfile(source_metadata, Path(root) / SOURCE_METADATA_NAME)
     return n_eps, n_frames
