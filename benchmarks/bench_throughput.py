@@ -32,6 +32,7 @@ import json
 import math
 import os
 import platform
+import resource
 import shutil
 import subprocess
 import sys
@@ -114,17 +115,25 @@ def _episode_record(env_id: str, i: int, r: Any, wall_s: float, **extra: Any) ->
 def run_serial(spec: dict[str, Any]) -> dict[str, Any]:
     """Run `serial_child` in a fresh interpreter (no state shared with the parent)."""
     t0 = time.perf_counter()
+    cpu0 = _cpu_s(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(
         [sys.executable, __file__, "--_serial-child", json.dumps(spec)],
         capture_output=True,
         text=True,
     )
+    cpu_s = _cpu_s(resource.RUSAGE_CHILDREN) - cpu0
     if proc.returncode != 0:
         raise SystemExit(f"serial run failed:\n{proc.stderr[-4000:]}")
     line = next(x for x in proc.stdout.splitlines() if x.startswith("RESULT"))
     out = json.loads(line[len("RESULT") :])
     out["process_wall_s"] = time.perf_counter() - t0
+    out["cpu_s"] = cpu_s  # user + system time of the whole child, all its threads
     return out
+
+
+def _cpu_s(who: int) -> float:
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
 
 
 # ------------------------------------------------------------------------------------
@@ -177,9 +186,13 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
             commit=None,
         )
         executor = Recording(make_executor(args.executor, args.workers, address=args.address))
+        cpu0 = _cpu_s(resource.RUSAGE_SELF) + _cpu_s(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         execute_runs([store], executor, progress=False)
         wall_s = time.perf_counter() - t0
+        # Local workers are joined when the run ends, so their CPU time is counted here;
+        # Ray actors are not our children (None).
+        cpu_s = _cpu_s(resource.RUSAGE_SELF) + _cpu_s(resource.RUSAGE_CHILDREN) - cpu0
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     episodes = [
@@ -201,6 +214,7 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
         "startup_s": getattr(executor.inner, "startup_s", None),
         "executor": executor.describe(),
         "render": sorted({e["render"] for e in episodes if e["render"]}),
+        "cpu_s": cpu_s if args.executor == "local" else None,
         "episodes": episodes,
     }
 
@@ -251,7 +265,7 @@ def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict
 
     Steady state: per worker, its steps over the time its episodes took without env
     builds; summed over workers (they run concurrently). For the serial loop this is its
-    steps over the loop time minus env builds.
+    steps over the wall time minus ``setup_s`` (imports and env builds).
     """
     steps = sum(e["n_steps"] for e in episodes)
     by_worker: dict[Any, list[dict[str, Any]]] = {}
@@ -274,6 +288,24 @@ def full_run_steps() -> tuple[int, int]:
 
     tasks = select_benchmark_tasks(split="all")
     return len(tasks), FULL_RUN_EPISODES * sum(t.max_episode_steps for t in tasks)
+
+
+def _cpu_line(mode: dict[str, Any]) -> str:
+    """CPU use of a mode (start-up included): on a shared machine wall-clock rates depend
+    on what others run, and the average number of busy cores shows how much of the
+    machine the mode actually got."""
+    cpu = mode.get("cpu_s")
+    if cpu is None:
+        return "CPU time n/a"
+    wall = mode["wall_s"]
+    return f"CPU {cpu:.0f} s in all, {cpu / wall:.2f} cores busy on average"
+
+
+def _load() -> list[float] | None:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
 
 
 def _hms(seconds: float) -> str:
@@ -314,6 +346,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (--executor ray)")
     p.add_argument("--skip-serial", action="store_true", help="only the parallel runner")
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="alternate serial and parallel this many times and compare each mode's best "
+        "round (for shared machines)",
+    )
     p.add_argument("--json", default=None, metavar="PATH", help="write every figure here")
     p.add_argument("--_serial-child", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -353,35 +392,55 @@ def main(argv: Sequence[str] | None = None) -> int:
         flush=True,
     )
 
-    serial = None
-    if not args.skip_serial:
-        print("serial loop ...", flush=True)
-        serial = run_serial(spec)
-        serial["rates"] = rates(serial["episodes"], serial["loop_s"], serial["env_build_s"])
-        r = serial["rates"]
+    # Serial and parallel alternate, `--repeats` times; each mode's best (least disturbed)
+    # round is compared, as the machine may be shared.
+    serial_rounds: list[dict[str, Any]] = []
+    par_rounds: list[dict[str, Any]] = []
+    for rnd in range(1, args.repeats + 1):
+        tag = f" (round {rnd}/{args.repeats})" if args.repeats > 1 else ""
+        if not args.skip_serial:
+            print(f"serial loop{tag} ...", flush=True)
+            sr = run_serial(spec)
+            sr["load_average"] = _load()
+            # End to end includes the imports, as the parallel wall time includes the
+            # workers' start; steady state is the loop without env builds.
+            sr["wall_s"] = sr["import_s"] + sr["loop_s"]
+            sr["rates"] = rates(sr["episodes"], sr["wall_s"], sr["import_s"] + sr["env_build_s"])
+            r = sr["rates"]
+            print(
+                f"  {r['steps']} steps in {sr['wall_s']:.1f} s (imports {sr['import_s']:.1f} s, "
+                f"env builds {sr['env_build_s']:.1f} s); render {sr['render']}, "
+                f"LP_NUM_THREADS {sr['lp_num_threads']}\n"
+                f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
+                f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(sr)}",
+                flush=True,
+            )
+            serial_rounds.append(sr)
+        print(f"parallel runner, {workers} workers{tag} ...", flush=True)
+        pr = run_parallel(spec, args)
+        pr["load_average"] = _load()
+        pr["env_build_s"] = sum(e["setup_s"] for e in pr["episodes"])
+        pr["rates"] = rates(pr["episodes"], pr["wall_s"], pr["env_build_s"])
+        r = pr["rates"]
+        start = pr["startup_s"]
         print(
-            f"  {r['steps']} steps in {serial['loop_s']:.1f} s (+{serial['import_s']:.1f} s "
-            f"imports; env builds {serial['env_build_s']:.1f} s); render {serial['render']}, "
-            f"LP_NUM_THREADS {serial['lp_num_threads']}\n"
+            f"  {r['steps']} steps in {pr['wall_s']:.1f} s (worker start "
+            f"{'?' if start is None else f'{start:.1f}'} s; env builds "
+            f"{pr['env_build_s']:.1f} s summed over workers); render "
+            f"{', '.join(pr['render'])}\n"
             f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
-            f"{r['steady_steps_per_s']:.1f} steps/s",
+            f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(pr)}",
             flush=True,
         )
+        par_rounds.append(pr)
 
-    print(f"parallel runner ({workers} workers) ...", flush=True)
-    par = run_parallel(spec, args)
-    setup = sum(e["setup_s"] for e in par["episodes"])
-    par["rates"] = rates(par["episodes"], par["wall_s"], setup)
-    r = par["rates"]
+    def best(rounds: list[dict[str, Any]]) -> dict[str, Any] | None:
+        return max(rounds, key=lambda x: x["rates"]["steady_steps_per_s"]) if rounds else None
+
+    serial, par = best(serial_rounds), best(par_rounds)
+    assert par is not None
+    setup = par["env_build_s"]
     startup = par["startup_s"]
-    print(
-        f"  {r['steps']} steps in {par['wall_s']:.1f} s (worker start "
-        f"{startup if startup is None else f'{startup:.1f}'} s; env builds {setup:.1f} s "
-        f"summed over workers); render {', '.join(par['render'])}\n"
-        f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
-        f"{r['steady_steps_per_s']:.1f} steps/s",
-        flush=True,
-    )
 
     out: dict[str, Any] = {
         "machine": info,
@@ -389,14 +448,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         "parallel_render_device": render_desc,
         "serial": serial,
         "parallel": par,
+        "rounds": {"serial": serial_rounds, "parallel": par_rounds},
     }
     print()
     if serial is not None:
         key = lambda e: (e["env_id"], e["episode"])  # noqa: E731
         fields = ("seed", "success_once", "episode_return", "n_steps")
-        a = {key(e): [e[f] for f in fields] for e in serial["episodes"]}
-        b = {key(e): [e[f] for f in fields] for e in par["episodes"]}
-        identical = a == b
+        runs = [
+            {key(e): [e[f] for f in fields] for e in r["episodes"]}
+            for r in serial_rounds + par_rounds
+        ]
+        identical = all(x == runs[0] for x in runs)
         ratio_e2e = (
             par["rates"]["end_to_end_steps_per_s"] / serial["rates"]["end_to_end_steps_per_s"]
         )
@@ -409,7 +471,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             "target_speedup": target,
             "target_met": None if target is None else ratio_steady >= target,
         }
-        print(f"per-episode results identical (serial vs parallel): {'yes' if identical else 'NO'}")
+        print(
+            f"per-episode results identical (serial vs parallel, every round): "
+            f"{'yes' if identical else 'NO'}"
+        )
+        if args.repeats > 1:
+            print("best rounds compared (highest steady-state rate of each mode)")
         print(f"speed-up, end to end:  {ratio_e2e:.2f}x")
         line = f"speed-up, steady state: {ratio_steady:.2f}x"
         if target is not None:
