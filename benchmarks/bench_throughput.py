@@ -260,7 +260,7 @@ def machine_info() -> dict[str, Any]:
     }
 
 
-def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict[str, float]:
+def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict[str, Any]:
     """End-to-end and steady-state steps/s.
 
     Steady state: per worker, its steps over the time its episodes took without env
@@ -271,14 +271,23 @@ def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict
     by_worker: dict[Any, list[dict[str, Any]]] = {}
     for e in episodes:
         by_worker.setdefault(e.get("worker", 0), []).append(e)
+    out: dict[str, Any] = {"steps": steps, "end_to_end_steps_per_s": steps / wall_s}
     if len(by_worker) == 1 and "worker" not in episodes[0]:
-        steady = steps / max(1e-9, wall_s - setup_s)
-    else:
-        steady = 0.0
-        for eps in by_worker.values():
-            busy = sum(e["wall_s"] - e.get("setup_s", 0.0) for e in eps)
-            steady += sum(e["n_steps"] for e in eps) / max(1e-9, busy)
-    return {"steps": steps, "end_to_end_steps_per_s": steps / wall_s, "steady_steps_per_s": steady}
+        out["steady_steps_per_s"] = steps / max(1e-9, wall_s - setup_s)
+        return out
+    # Per render device kind ("gpu"/"cpu"): how a mixed pool's two halves perform.
+    kinds: dict[str, list[float]] = {}
+    for eps in by_worker.values():
+        busy = sum(e["wall_s"] - e.get("setup_s", 0.0) for e in eps)
+        rate = sum(e["n_steps"] for e in eps) / max(1e-9, busy)
+        kind = str(eps[0].get("render") or "?").split(":")[0]
+        kinds.setdefault(kind, []).append(rate)
+    out["steady_steps_per_s"] = sum(sum(v) for v in kinds.values())
+    out["per_render_kind"] = {
+        k: {"workers": len(v), "steady_steps_per_s": sum(v), "per_worker": sum(v) / len(v)}
+        for k, v in sorted(kinds.items())
+    }
+    return out
 
 
 def full_run_steps() -> tuple[int, int]:
@@ -432,6 +441,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(pr)}",
             flush=True,
         )
+        for kind, k in r["per_render_kind"].items():
+            print(
+                f"    {kind}-rendering workers: {k['workers']}, {k['per_worker']:.1f} steps/s "
+                f"each, {k['steady_steps_per_s']:.1f} together"
+            )
         par_rounds.append(pr)
 
     def best(rounds: list[dict[str, Any]]) -> dict[str, Any] | None:
