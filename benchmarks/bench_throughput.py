@@ -1,25 +1,35 @@
 """Evaluation throughput: the serial reference loop vs the parallel runner of mikasa-bench.
 
-Runs the same tasks and episodes with the zero policy twice and compares env-steps/s:
+Runs the same tasks and episodes with the zero policy in two ways and compares env-steps/s:
 
 * **serial**: one env in one process, a plain loop over tasks and episodes like the
   reference runner (``make_benchmark_env`` + ``run_episode``), in a fresh interpreter, with
-  ManiSkill's default render device (``--serial-render-device``);
+  ManiSkill's default render device (``--serial-render-device``) and lavapipe's default
+  threads;
 * **parallel**: `execute_runs` (journal, result files) on the local process pool (or Ray)
   with ``--workers`` workers rendering where ``--render-device`` says.
 
 Two rates are reported for each. *End to end*: all steps over the whole wall time,
-including worker start (imports) and env builds; this is what a short run sees. *Steady
-state*: steps over the time spent stepping, i.e. without process start and env builds (the
-first, shader-compiling build of a process costs 10-20 s on lavapipe); this is what a long
-run converges to, and the projection for the full canonical run (every manifest task, 50
-episodes each, full horizons) uses it plus the measured start-up. The per-episode results
-of both modes must be identical (zero policy, same seeds).
+imports / worker start and env builds included; this is what a short run sees. *Steady
+state*: steps over the time spent in episodes, without start-up and env builds (the first,
+shader-compiling env build of a process costs 10-20 s with lavapipe); this is what a long
+run converges to. The target is checked on steady state, and the projection for the full
+canonical run (every manifest task x 50 episodes at full horizons, 2.03 M steps) uses it
+plus the measured start-up. Also printed: CPU time and average busy cores of each mode
+(on a shared machine they show how much of it the run actually got), the steady rate of
+GPU- and CPU-rendering workers separately (to size a mixed pool), and whether the
+per-episode results of all runs are identical (they must be: zero policy, same seeds).
 
     python benchmarks/bench_throughput.py                       # rgb, workers = cores
-    python benchmarks/bench_throughput.py --workers 16 --render-device cpu --json out.json
-    python benchmarks/bench_throughput.py --workers 16 --render-device cpu --gpu-render-workers 2
+    python benchmarks/bench_throughput.py --repeats 3            # shared machine: best of 3
     python benchmarks/bench_throughput.py --obs-mode state --tasks RememberColor3-VLA-v0
+
+On a 16-core GPU machine (lavapipe needed for CPU rendering: mesa-vulkan-drivers):
+
+    python benchmarks/bench_throughput.py --workers 16 --json gpu16_auto.json
+    python benchmarks/bench_throughput.py --workers 16 --render-device cpu --json gpu16_cpu.json
+    python benchmarks/bench_throughput.py --workers 16 --render-device cpu \
+        --gpu-render-workers 2 --json gpu16_mixed2.json
 
 Targets (steady-state ratio): >= 1.8x with 2 workers on a 2-core machine, >= 12x with 16
 workers on a 16-core GPU machine.
