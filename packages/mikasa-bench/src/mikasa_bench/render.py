@@ -10,7 +10,10 @@ How ManiSkill 3.0.1 and SAPIEN 3 pick the render device (read from their sources
 * SAPIEN then creates one Vulkan context per process on that device. For the ``cpu``
   device the Vulkan physical device is chosen *without a hint*, and that rule still
   prefers a device with a CUDA id: on a machine with an NVIDIA GPU, ``render_backend="cpu"``
-  alone renders on the GPU. Only one render device per process is possible.
+  alone renders on the GPU. Only one render device per process is possible. (Read from
+  the sources of SAPIEN and sapien-vulkan-2; on this project's CPU-only machines only
+  lavapipe exists, so the GPU side is not yet observed. `check_render_device` verifies
+  the outcome in every worker either way.)
 
 So rendering on the CPU (Mesa's lavapipe) on a GPU machine needs the Vulkan loader to see
 lavapipe only: a CPU-rendering worker sets ``VK_ICD_FILENAMES``/``VK_DRIVER_FILES`` to the
