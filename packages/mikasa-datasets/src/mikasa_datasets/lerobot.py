@@ -46,8 +46,10 @@ import functools
 import inspect
 import json
 import os
+import queue
 import shutil
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -293,6 +295,47 @@ def write_lerobot(
     return n_eps, n_frames
 
 
+def _prefetch(items: Iterator[Any], depth: int = 3) -> Iterator[Any]:
+    """Yield from ``items`` while a background thread reads up to ``depth`` ahead.
+
+    Reading an episode (NPZ CRC checks, RLDS record parsing and PNG decoding, which release
+    the GIL) then overlaps with lerobot's writing instead of adding to it. An exception in
+    the reader is re-raised in the consumer, at the position it occurred.
+    """
+    done = object()
+    buffer: queue.Queue[Any] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        buffer.put((True, item), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            buffer.put((True, done))
+        except BaseException as exc:  # handed to the consumer
+            buffer.put((False, exc))
+
+    thread = threading.Thread(target=produce, name="mikasa-datasets-reader", daemon=True)
+    thread.start()
+    try:
+        while True:
+            ok, item = buffer.get()
+            if not ok:
+                raise item
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
+        thread.join(timeout=5)
+
+
 def _convert(
     episodes: Callable[[], Iterator[dict[str, np.ndarray]]],
     *,
@@ -330,7 +373,7 @@ def _convert(
     staging = new_staging_dir(final)
     try:
         n_eps, n_frames = write_lerobot(
-            episodes(),
+            _prefetch(episodes()),
             staging,
             repo_id,
             fps=fps,
