@@ -93,9 +93,10 @@ def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
         render = render or check_render_device(env, spec["render_device"])
         try:
             for i, seed in enumerate(config.episode_seeds()):
-                te = time.perf_counter()
+                te, ce = time.perf_counter(), time.process_time()
                 r, _ = run_episode(env, policy, seed)
-                episodes.append(_episode_record(env_id, i, r, time.perf_counter() - te))
+                wall, cpu = time.perf_counter() - te, time.process_time() - ce
+                episodes.append(_episode_record(env_id, i, r, wall, cpu_s=cpu))
         finally:
             env.close()
     loop_s = time.perf_counter() - t0
@@ -213,6 +214,7 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
             o.wall_s,
             worker=o.worker,
             setup_s=o.setup_s,
+            cpu_s=o.cpu_s,
             render=o.render,
             done_at_s=t - t0,
         )
@@ -282,6 +284,9 @@ def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict
     for e in episodes:
         by_worker.setdefault(e.get("worker", 0), []).append(e)
     out: dict[str, Any] = {"steps": steps, "end_to_end_steps_per_s": steps / wall_s}
+    # CPU seconds per step inside episodes (process time, all threads): the cost of a step
+    # independent of how much of a shared machine the run got.
+    out["cpu_ms_per_step"] = 1000 * sum(e.get("cpu_s", 0.0) for e in episodes) / max(1, steps)
     if len(by_worker) == 1 and "worker" not in episodes[0]:
         out["steady_steps_per_s"] = steps / max(1e-9, wall_s - setup_s)
         return out
@@ -431,7 +436,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"env builds {sr['env_build_s']:.1f} s); render {sr['render']}, "
                 f"LP_NUM_THREADS {sr['lp_num_threads']}\n"
                 f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
-                f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(sr)}",
+                f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(sr)}; "
+                f"{r['cpu_ms_per_step']:.0f} CPU-ms per step",
                 flush=True,
             )
             serial_rounds.append(sr)
@@ -448,7 +454,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{pr['env_build_s']:.1f} s summed over workers); render "
             f"{', '.join(pr['render'])}\n"
             f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "
-            f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(pr)}",
+            f"{r['steady_steps_per_s']:.1f} steps/s; {_cpu_line(pr)}; "
+            f"{r['cpu_ms_per_step']:.0f} CPU-ms per step",
             flush=True,
         )
         for kind, k in r["per_render_kind"].items():

@@ -94,6 +94,9 @@ class EpisodeOutcome:
     """Where the worker rendered, e.g. ``"cpu: llvmpipe (LLVM 15.0.6, 256 bits)"``."""
     setup_s: float = 0.0
     """Part of ``wall_s`` spent building the env and policy (0 when they were cached)."""
+    cpu_s: float = 0.0
+    """CPU time of the worker process (all its threads, e.g. lavapipe's) over the
+    episode, env build excluded: what an episode costs, whatever else runs on the host."""
 
     def describe_failure(self) -> str:
         """A message naming the task, episode, seed and policy of a failed job."""
@@ -141,6 +144,7 @@ class _EpisodeWorker:
             env = self._env_for(job)
             policy = self._policy_for(job, env)
             setup_s = time.perf_counter() - t0
+            cpu0 = time.process_time()
             chunk = policy_chunk_size(policy)
             video = None
             if job.config.save_videos:
@@ -160,6 +164,7 @@ class _EpisodeWorker:
                 video=video,
                 render=self.render,
                 setup_s=setup_s,
+                cpu_s=time.process_time() - cpu0,
             )
         except Exception as exc:
             # The env may be mid-episode: drop it so a later job starts clean.
