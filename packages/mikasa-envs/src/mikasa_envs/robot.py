@@ -183,7 +183,12 @@ class FastPDEEPoseController(PDEEPoseController):
         if not self._fast_path():
             return super().set_action(action)
         a = action.detach().cpu().numpy().reshape(-1).astype(np.float64)
-        low, high = self.action_space_low[:3].cpu().numpy(), self.action_space_high[:3].cpu().numpy()
+        if getattr(self, "_pos_bounds", None) is None:  # constant per controller; not per step
+            self._pos_bounds = (
+                self.action_space_low[:3].cpu().numpy(),
+                self.action_space_high[:3].cpu().numpy(),
+            )
+        low, high = self._pos_bounds
         delta_pos = low + 0.5 * (np.clip(a[:3], -1.0, 1.0) + 1.0) * (high - low)
         delta_rot = a[3:6]
         norm = np.linalg.norm(delta_rot)
