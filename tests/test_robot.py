@@ -27,14 +27,16 @@ def test_cluster_decimate_merges_cells_and_drops_degenerate_faces():
 def test_light_urdf_swaps_only_visual_meshes(tmp_path, monkeypatch):
     monkeypatch.setenv("MIKASA_CACHE_DIR", str(tmp_path))
     original = (robot.PANDA_DIR / "panda_v3.urdf").read_text()
-    for light_links in (False, True):
-        text = robot.light_panda_urdf(light_links).read_text()
+    for meshes in ("original", "light"):
+        text = robot.light_panda_urdf(meshes).read_text()
         files = re.findall(r'filename="([^"]+)"', text)
         assert len(files) == len(re.findall(r'filename="([^"]+)"', original))
         swapped = [f for f in files if str(tmp_path) in f]
         assert any("d415" in f for f in swapped)
         assert all("collision" not in f for f in swapped)
-        assert any("link3" in f for f in swapped) == light_links
+        assert any("link3" in f for f in swapped) == (meshes == "light")
+        # The hand and fingers fill the wrist camera's view: never decimated.
+        assert not any("hand" in f or "finger" in f for f in swapped)
 
 
 def test_fast_controller_matches_maniskill(make_env):
@@ -51,3 +53,20 @@ def test_fast_controller_matches_maniskill(make_env):
         PDEEPoseController.set_action(arm, torch.from_numpy(action[None, :6]))
         torch.testing.assert_close(fast, arm._target_qpos, atol=1e-5, rtol=0)
         env.step(action)
+
+
+def test_quadric_decimation_keeps_the_shape():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    light = robot.quadric_decimate(sphere, keep=0.2, crease_deg=15.0)
+    assert 0.15 * len(sphere.faces) <= len(light.faces) <= 0.25 * len(sphere.faces)
+    assert abs(np.linalg.norm(light.vertices, axis=1) - 1.0).max() < 0.02
+
+
+def test_unknown_robot_meshes_value_names_the_choices(monkeypatch):
+    import pytest
+
+    monkeypatch.setenv("MIKASA_ROBOT_MESHES", "fancy")
+    with pytest.raises(ValueError, match="light, original"):
+        robot.robot_meshes()

@@ -19,6 +19,8 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
 
+from mikasa_envs.building_blocks.ground import coarsen_ground_visual
+from mikasa_envs.camera_group import CameraGroupRenderer
 from mikasa_envs.robot import LightPandaWristCam
 
 ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
@@ -77,6 +79,8 @@ class MikasaVLABaseEnv(BaseEnv):
         self.task_cue: torch.Tensor | None = None
         self.oracle_info: torch.Tensor | None = None
         self._reward_dict: dict[str, torch.Tensor] | None = None
+        self._camera_group: CameraGroupRenderer | None = None
+        self._camera_group_unsupported: object = None  # the scene a group failed for
         try:
             super().__init__(*args, robot_uids=robot_uids, **kwargs)
         except AssertionError as err:
@@ -111,6 +115,7 @@ class MikasaVLABaseEnv(BaseEnv):
     def _load_scene(self, options: dict) -> None:
         self.table_scene = TableSceneBuilder(self, robot_init_qpos_noise=self.robot_init_qpos_noise)
         self.table_scene.build()
+        coarsen_ground_visual(self.table_scene.ground)  # same look, 1% of the triangles
         n = self.num_envs
         self.cue_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
         self.empty_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
@@ -126,9 +131,32 @@ class MikasaVLABaseEnv(BaseEnv):
         self._sensors = dict()
         self._human_render_cameras = dict()
         self.scene = None
+        self._camera_group = None
+        self._camera_group_unsupported = None
         self._hidden_objects = []
         if had_scene:
             gc.collect()
+
+    # ------------------------------------------------------------ rendering
+    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        # CPU physics with GPU rendering: both cameras in one batched pass (camera_group.py).
+        group = self._sensor_camera_group() if apply_texture_transforms else None
+        if group is None:
+            return super()._get_obs_sensor_data(apply_texture_transforms)
+        return {name: {"rgb": image} for name, image in group.render().items()}
+
+    def _sensor_camera_group(self) -> CameraGroupRenderer | None:
+        scene = self.scene.sub_scenes[0] if self.scene is not None else None
+        if self._camera_group is not None and self._camera_group.scene is scene:
+            return self._camera_group
+        self._camera_group = None
+        if scene is None or self._camera_group_unsupported is scene:
+            return None
+        if CameraGroupRenderer.supported(self):
+            self._camera_group = CameraGroupRenderer.for_env(self)
+        else:
+            self._camera_group_unsupported = scene
+        return self._camera_group
 
     # ------------------------------------------------------------- episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:

@@ -6,13 +6,13 @@ keeps that cost out of the first ``gym.make``.
 
 from __future__ import annotations
 
-from mikasa_envs.robot import light_panda_urdf
+from mikasa_envs.robot import ROBOT_MESH_CHOICES, light_panda_urdf
 
 
 def main() -> None:
-    """Create both light robot descriptions in the cache and print their paths."""
-    for light_links in (False, True):
-        print(f"light panda_wristcam description (light links: {light_links}): {light_panda_urdf(light_links)}")
+    """Create both robot descriptions in the cache and print their paths."""
+    for meshes in ROBOT_MESH_CHOICES:
+        print(f"panda_wristcam description ({meshes} meshes): {light_panda_urdf(meshes)}")
 
 
 if __name__ == "__main__":
