@@ -465,6 +465,18 @@ def test_jobs_are_task_major_and_seeded(tmp_path):
     assert sched.next_for(first.env_key).episode == 1  # stays on the env it has
 
 
+def test_scheduler_spreads_new_workers_over_tasks(tmp_path):
+    jobs = _jobs_for([_store(tmp_path, n=3)])
+    sched = _Scheduler(jobs)
+    a, b = sched.next_for(None), sched.next_for(None)
+    assert a.task.env_id != b.task.env_id  # two workers, two envs: not both on task 1
+    rest = [sched.next_for(a.env_key) for _ in range(2)] + [sched.next_for(b.env_key) for _ in range(2)]
+    assert all(j is not None for j in rest) and sched.next_for(a.env_key) is None
+    assert sorted((j.task.env_id, j.episode) for j in [a, b, *rest]) == sorted(
+        (j.task.env_id, j.episode) for j in jobs
+    )
+
+
 def test_resume_from_journal_neither_loses_nor_duplicates(tmp_path):
     store = _store(tmp_path)
     store.record_episode(

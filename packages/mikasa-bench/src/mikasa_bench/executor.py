@@ -310,19 +310,33 @@ def _worker_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, st
 
 
 class _Scheduler:
-    """Hands out jobs task by task, preferring the env a worker already has."""
+    """Hands out jobs task by task: a worker keeps the env it has while that task has
+    jobs left; a worker that needs a new env joins the task with the fewest workers on it
+    (then the one with the most jobs left). Workers thus spread over tasks instead of all
+    building every task's env in turn: measured on the GPU machine, an env build costs
+    2-5 s while 16 workers build at once, as much as ~40 short episodes. Which worker runs
+    an episode never changes its result."""
 
     def __init__(self, jobs: Sequence[EpisodeJob]) -> None:
         self.groups: OrderedDict[Hashable, deque[EpisodeJob]] = OrderedDict()
         for job in jobs:
             self.groups.setdefault(job.env_key, deque()).append(job)
+        self.holders: dict[Hashable, int] = {}
+        """Env key -> workers whose last job was of that key."""
 
     def next_for(self, last_key: Hashable | None) -> EpisodeJob | None:
+        """The next job for a worker whose last job had env key ``last_key``."""
         group = self.groups.get(last_key) if last_key is not None else None
         if not group:
-            group = next((g for g in self.groups.values() if g), None)
-        if not group:
-            return None
+            if not self.groups:
+                return None
+            # A new env: the least-served task (order of the run as the last tie-break).
+            order = {key: i for i, key in enumerate(self.groups)}
+            key = min(self.groups, key=lambda k: (self.holders.get(k, 0), -len(self.groups[k]), order[k]))
+            group = self.groups[key]
+            if last_key is not None and self.holders.get(last_key):
+                self.holders[last_key] -= 1
+            self.holders[key] = self.holders.get(key, 0) + 1
         job = group.popleft()
         if not group:
             del self.groups[job.env_key]
