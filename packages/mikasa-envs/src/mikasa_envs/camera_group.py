@@ -2,11 +2,11 @@
 
 With CPU physics and a CUDA render device, ManiSkill renders each camera on its own: a
 ``take_picture`` and a blocking ``get_picture`` download per camera, then a
-``torch.cuda.synchronize()``. One process does not notice, but many processes sharing one
-GPU do: measured on an H200 with 16 processes, one env each, the standard path reached
-~550 rgb steps/s in total, while rendering both cameras through one SAPIEN camera group
-(the batched API ManiSkill uses for GPU simulation) reached ~2,000 — with pixel-identical
-images (max difference 0 against the standard path).
+``torch.cuda.synchronize()``. Rendering both cameras through one SAPIEN camera group (the
+batched API ManiSkill uses for GPU simulation) submits one pass instead of two and returns
+the same pixels (within 1/255, `benchmarks/gpu_camera_group_check.py`). Measured on an
+H200: one process ~200 rgb steps/s either way; in the bench's 16-worker runner ~770-930
+together, where the GPU shared by the processes is the limit.
 
 The camera group reads object poses from a CUDA buffer. Here that buffer is filled from
 the CPU scene: ``Scene.pack_poses()`` gives every entity's pose in one call (a few µs),
@@ -14,8 +14,8 @@ the rows that render bodies and cameras use are copied to pinned memory, uploade
 the group renders all pictures into CUDA memory, and they come back in one copy. The
 images are returned on the CPU, with the rest of a CPU-simulated env's observation.
 (ManiSkill's per-camera path returns views of the GPU picture buffers instead; every
-later operation on them is then a small CUDA launch, and with 16 processes sharing the GPU
-those queued behind each other: the bench's 16 workers made 790 rgb steps/s that way.)
+later operation on them is then a small CUDA launch queued behind the other processes'
+work: the bench's 16 workers made 790 rgb steps/s that way, 927 with CPU images.)
 The wait for the copy uses a blocking CUDA event, so a waiting process yields its core
 to the others instead of spinning.
 
