@@ -8,7 +8,12 @@ are the right entities' poses, and CPU rendering never takes the path.
 from __future__ import annotations
 
 import numpy as np
-from mikasa_envs.camera_group import CameraGroupRenderer, assign_pose_rows, check_pose_layout, packed_poses
+from mikasa_envs.camera_group import (
+    CameraGroupRenderer,
+    assign_pose_rows,
+    check_pose_layout,
+    packed_poses,
+)
 
 
 def test_pose_rows_hold_each_render_body_and_camera_pose(make_env):
@@ -26,7 +31,7 @@ def test_pose_rows_hold_each_render_body_and_camera_pose(make_env):
     for entity in owners:
         seen.setdefault(entity.global_id, entity)
     assert len(rows) == len(seen)
-    for (q_p, entity) in zip(packed, seen.values()):
+    for q_p, entity in zip(packed, seen.values(), strict=True):
         np.testing.assert_allclose(q_p[:4], entity.pose.q, atol=1e-6)
         np.testing.assert_allclose(q_p[4:], entity.pose.p, atol=1e-6)
 

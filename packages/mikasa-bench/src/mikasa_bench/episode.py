@@ -199,7 +199,7 @@ def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> An
         VLA_WRAPPER_CONFIGS,
         ConvertJointsToEEFXyzRpyGripperWrapper,
         FlattenRGBDObservationWrapper,
-        StateOnlyTensorToDictWrapper,
+        apply_chain_head,
     )
 
     from .errors import UnknownTaskError
@@ -229,12 +229,7 @@ def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> An
             ).to(torch.float32)
             return {"proprio": proprio, **obs}
 
-    wrapped: Any = StateOnlyTensorToDictWrapper(env)
-    if config.curriculum_wrapper is not None:
-        wrapped = config.curriculum_wrapper(wrapped)
-    if include_overlays:
-        for overlay in config.overlays:
-            wrapped = overlay(wrapped)
+    wrapped: Any = apply_chain_head(env, config, include_overlays=include_overlays)
     wrapped = FlattenRGBDObservationWrapper(
         wrapped, rgb=False, depth=False, state=True, oracle=False, joints=False
     )

@@ -29,13 +29,13 @@ import logging
 import multiprocessing as mp
 import os
 import queue
-import signal
 import time
 import traceback
 from abc import ABC, abstractmethod
 from collections import OrderedDict, deque
 from collections.abc import Hashable, Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 from .episode import EpisodeResult, make_benchmark_env, run_episode
@@ -278,35 +278,18 @@ def _quiet_worker() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
-def _worker_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, str]) -> None:
-    """Entry point of a `LocalExecutor` worker process."""
-    # Ctrl-C reaches the whole process group: the parent handles it (it stops the pool
-    # and keeps what is saved); a worker dying mid-episode would only add noise.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _start_worker(worker_id: int, env_vars: dict[str, str]) -> _EpisodeWorker:
     # Before anything can initialise Vulkan: the render device's driver restriction.
     apply_environment(env_vars)
-    try:
-        _quiet_worker()
-    except BaseException:
-        outbox.put(("fatal", worker_id, traceback.format_exc()))
-        return
-    outbox.put(("ready", worker_id, None))
-    worker = _EpisodeWorker(worker_id)
-    parent = mp.parent_process()
-    try:
-        while True:
-            try:
-                job = inbox.get(timeout=1.0)
-            except queue.Empty:
-                # The parent was killed (e.g. kill -9): exit instead of idling forever.
-                if parent is not None and not parent.is_alive():
-                    break
-                continue
-            if job is None:
-                break
-            outbox.put(("done", worker_id, worker.run(job)))
-    finally:
-        worker.close()
+    _quiet_worker()
+    return _EpisodeWorker(worker_id)
+
+
+def _worker_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, str]) -> None:
+    """Entry point of a `LocalExecutor` worker process."""
+    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
+
+    serve_jobs(worker_id, inbox, outbox, partial(_start_worker, worker_id, env_vars))
 
 
 class _Scheduler:
@@ -444,19 +427,11 @@ class LocalExecutor(Executor):
                     h.inbox.put(None)
                 except Exception:
                     pass
-            deadline = time.monotonic() + 30
-            for h in handles:
-                h.process.join(timeout=max(0.1, deadline - time.monotonic()))
         # Error / interrupt (or a worker that did not exit): stop now; the episodes they
         # were running are not recorded and will be rerun by --resume.
-        for h in handles:
-            if h.process.is_alive():
-                h.process.terminate()
-        for h in handles:
-            h.process.join(timeout=5)
-            if h.process.is_alive():
-                h.process.kill()
-                h.process.join(timeout=5)
+        from mikasa_envs.workers import stop_processes
+
+        stop_processes([h.process for h in handles], wait_s=30 if graceful else 0)
 
 
 def _ray_executor(workers: int | None = None, address: str | None = None) -> Executor:

@@ -90,9 +90,25 @@ def _format_rows(header: Sequence[str], rows: Sequence[Sequence[str]], right: se
 def text_table(runs: Sequence[RunData]) -> str:
     """The per-task results of every run plus per-split / per-memory-type / overall means."""
     header = ["Task", "Split", "Memory", "Policy", "SR", "95% CI", "Return", "Length", "Eps"]
-    rows: list[list[str]] = []
+    rows = _task_cells(runs, ci="[{lo}, {hi}]")
+    # One block per task: its id, split and memory type only on the block's first line.
+    ids = [row[0] for row in rows]
+    for i in range(1, len(rows)):
+        if ids[i] == ids[i - 1]:
+            rows[i][:3] = ["", "", ""]
+    out = [_format_rows(header, rows, right={4, 6, 7, 8})]
+    agg_rows = _group_cells(runs, titles=("split", "memory"))
+    agg_rows.append(["overall (mean task SR)", *[_pct(_overall(run)) for run in runs]])
+    agg_header = ["Group", *[run.label for run in runs]]
+    out.append(_format_rows(agg_header, agg_rows, right=set(range(1, len(runs) + 1))))
+    return "\n\n".join(out)
+
+
+def _task_cells(runs: Sequence[RunData], *, ci: str) -> list[list[str]]:
+    """One row per (task, run): task, split, memory type, policy, SR, CI (``ci`` formats
+    ``lo``/``hi``), mean return, mean length, episodes."""
+    rows = []
     for env_id in _task_order(runs):
-        first = True
         for run in runs:
             r = _by_id(run).get(env_id)
             if r is None:
@@ -100,32 +116,32 @@ def text_table(runs: Sequence[RunData]) -> str:
             lo, hi = _ci(r)
             rows.append(
                 [
-                    env_id if first else "",
-                    r["split"] if first else "",
-                    r["memory_type"] if first else "",
+                    env_id,
+                    r["split"],
+                    r["memory_type"],
                     run.label,
                     _pct(float(r["sr"])),
-                    f"[{_pct(lo)}, {_pct(hi)}]",
+                    ci.format(lo=_pct(lo), hi=_pct(hi)),
                     f"{float(r['mean_return']):.2f}",
                     f"{_mean_len(r):.1f}",
                     str(len(r["successes"])),
                 ]
             )
-            first = False
-    out = [_format_rows(header, rows, right={4, 6, 7, 8})]
+    return rows
 
-    agg_header = ["Group", *[run.label for run in runs]]
-    agg_rows: list[list[str]] = []
+
+def _group_cells(runs: Sequence[RunData], *, titles: tuple[str, str]) -> list[list[str]]:
+    """Per-split and per-memory-type mean SR rows, one column per run (``titles`` name the
+    two groupings)."""
     aggs = [_aggregates(run) for run in runs]
-    for kind, title in (("split", "split"), ("memory_type", "memory")):
+    rows = []
+    for kind, title in zip(("split", "memory_type"), titles, strict=True):
         keys: dict[str, None] = {}
         for a in aggs:
             keys.update(dict.fromkeys(a[kind]))
         for k in keys:
-            agg_rows.append([f"{title}: {k}", *[_pct(a[kind].get(k, float("nan"))) for a in aggs]])
-    agg_rows.append(["overall (mean task SR)", *[_pct(_overall(run)) for run in runs]])
-    out.append(_format_rows(agg_header, agg_rows, right=set(range(1, len(runs) + 1))))
-    return "\n\n".join(out)
+            rows.append([f"{title}: {k}", *[_pct(a[kind].get(k, float("nan"))) for a in aggs]])
+    return rows
 
 
 # ------------------------------------------------------------------------------------
@@ -343,39 +359,12 @@ def _task_rows(runs: Sequence[RunData]) -> tuple[list[str], list[list[str]]]:
         "Mean length",
         "Episodes",
     ]
-    rows = []
-    for env_id in _task_order(runs):
-        for run in runs:
-            r = _by_id(run).get(env_id)
-            if r is None:
-                continue
-            lo, hi = _ci(r)
-            rows.append(
-                [
-                    env_id,
-                    r["split"],
-                    r["memory_type"],
-                    run.label,
-                    _pct(float(r["sr"])),
-                    f"{_pct(lo)} – {_pct(hi)}",
-                    f"{float(r['mean_return']):.2f}",
-                    f"{_mean_len(r):.1f}",
-                    str(len(r["successes"])),
-                ]
-            )
-    return header, rows
+    return header, _task_cells(runs, ci="{lo} – {hi}")
 
 
 def _agg_rows(runs: Sequence[RunData]) -> tuple[list[str], list[list[str]]]:
     header = ["Group", *[run.label for run in runs]]
-    aggs = [_aggregates(run) for run in runs]
-    rows = []
-    for kind, title in (("split", "Split"), ("memory_type", "Memory type")):
-        keys: dict[str, None] = {}
-        for a in aggs:
-            keys.update(dict.fromkeys(a[kind]))
-        for k in keys:
-            rows.append([f"{title}: {k}", *[_pct(a[kind].get(k, float("nan"))) for a in aggs]])
+    rows = _group_cells(runs, titles=("Split", "Memory type"))
     rows.append(["**Overall (mean task SR)**", *[f"**{_pct(_overall(run))}**" for run in runs]])
     return header, rows
 

@@ -125,6 +125,7 @@ class CameraGroupRenderer:
         self._group.set_cuda_stream(self._stream.cuda_stream)
         self._cameras = self._group.create_camera_group(cams, ["Color"])
         self._images = torch.zeros((len(cams), self.height, self.width, 3), dtype=torch.uint8).pin_memory()
+        self._copied = torch.cuda.Event(blocking=True)  # waited on without spinning a core
 
     def render(self) -> dict[str, torch.Tensor]:
         """Render every camera at the scene's current poses: name -> uint8 [1, H, W, 3] on the
@@ -137,9 +138,8 @@ class CameraGroupRenderer:
         self._cameras.take_picture()
         pictures = self._cameras.get_picture_cuda("Color").torch()
         self._images.copy_(pictures[..., :3], non_blocking=True)
-        done = torch.cuda.Event(blocking=True)  # wait without spinning a core
-        done.record(self._stream)
-        done.synchronize()
+        self._copied.record(self._stream)
+        self._copied.synchronize()
         # Clones: the pinned buffer is reused by the next render.
         return {name: self._images[i : i + 1].clone() for i, name in enumerate(self.names)}
 

@@ -30,6 +30,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sapien
@@ -40,6 +41,9 @@ from mani_skill.agents.robots.panda.panda_wristcam import PandaWristCam
 from mani_skill.utils.structs import Pose
 from transforms3d.euler import euler2quat
 from transforms3d.quaternions import qmult
+
+if TYPE_CHECKING:  # trimesh is imported where meshes are generated, not at env import
+    import trimesh
 
 D415_MESH = "realsense2_description/meshes/d415.stl"
 PANDA_DIR = Path(PACKAGE_ASSET_DIR) / "robots" / "panda"
@@ -108,7 +112,7 @@ def _write_atomic(path: Path, data: bytes | str) -> None:
     os.replace(tmp, path)
 
 
-def quadric_decimate(mesh: "trimesh.Trimesh", keep: float, crease_deg: float) -> "trimesh.Trimesh":
+def quadric_decimate(mesh: trimesh.Trimesh, keep: float, crease_deg: float) -> trimesh.Trimesh:
     """Weld, quadric-decimate to ``keep`` of the faces, smooth-shade with a crease angle."""
     import fast_simplification
     import trimesh

@@ -39,13 +39,13 @@ import multiprocessing as mp
 import os
 import queue
 import random
-import signal
 import sys
 import time
 import traceback
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -312,38 +312,23 @@ class _InlinePool:
         self.runner.close()
 
 
-def _worker_main(worker_id: int, runner_args: tuple[Any, ...], jobs: Any, results: Any) -> None:
-    """Entry point of a spawn-started worker: run seeds from ``jobs`` until ``None``."""
-    # Ctrl-C goes to the whole process group; the parent decides (it stops the pool).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _start_runner(runner_args: tuple[Any, ...]) -> _AttemptRunner:
     # W workers already use the cores: one thread each, for torch and for Mesa's CPU
     # Vulkan rasteriser (its frames do not depend on the thread count).
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("LP_NUM_THREADS", "1")
     logging.getLogger("mani_skill").setLevel(logging.ERROR)
-    try:
-        import torch
+    import torch
 
-        torch.set_num_threads(1)
-        runner = _AttemptRunner(*runner_args)
-    except BaseException:
-        results.put(("fatal", worker_id, traceback.format_exc()))
-        return
-    parent = mp.parent_process()
-    try:
-        while True:
-            try:
-                seed = jobs.get(timeout=1.0)
-            except queue.Empty:
-                # The parent was killed (kill -9): exit instead of idling forever.
-                if parent is not None and not parent.is_alive():
-                    break
-                continue
-            if seed is None:
-                break
-            results.put(("done", worker_id, runner.run(seed)))
-    finally:
-        runner.close()
+    torch.set_num_threads(1)
+    return _AttemptRunner(*runner_args)
+
+
+def _worker_main(worker_id: int, runner_args: tuple[Any, ...], jobs: Any, results: Any) -> None:
+    """Entry point of a spawn-started worker: run seeds from ``jobs`` until ``None``."""
+    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
+
+    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args))
 
 
 class _ProcessPool:
@@ -384,27 +369,22 @@ class _ProcessPool:
                 continue
             if kind == "fatal":
                 raise CollectionFailed(f"worker {wid} failed to start:\n{payload}")
+            if kind == "ready":
+                continue
             self.in_flight.discard(payload.seed)
             return payload
 
     def close(self, graceful: bool = True) -> None:
-        if graceful and not self.in_flight:
+        from mikasa_envs.workers import stop_processes
+
+        graceful = graceful and not self.in_flight
+        if graceful:
             for _ in self.processes:
                 self.jobs.put(None)
-            # Nothing is left to write (every attempt came back), so a worker slow to tear
-            # down its simulator is not worth waiting for.
-            deadline = time.monotonic() + 3
-            for p in self.processes:
-                p.join(timeout=max(0.1, deadline - time.monotonic()))
-        # Error / interrupt: stop now; their attempts were not committed and will be rerun.
-        for p in self.processes:
-            if p.is_alive():
-                p.terminate()
-        for p in self.processes:
-            p.join(timeout=5)
-            if p.is_alive():
-                p.kill()
-                p.join(timeout=5)
+        # Graceful: nothing is left to write (every attempt came back), so a worker slow
+        # to tear down its simulator is not worth waiting for long. Error / interrupt:
+        # stop now; their attempts were not committed and will be rerun.
+        stop_processes(self.processes, wait_s=3 if graceful else 0)
 
 
 # --------------------------------------------------------------------------- the collection

@@ -11,100 +11,12 @@ Typical use::
     obs, info = env.reset(seed=0)  # obs["proprio"]: (B, 7), obs["rgb"]: (B, 128, 128, 6)
 """
 
-from .apply_wrappers import (
-    MIKASA_VLA_ENV_IDS,
-    REQUIRED_OBS_MODE,
-    VLA_WRAPPER_CONFIGS,
-    VLAWrapperConfig,
-    apply_mikasa_vla_wrappers,
-)
-from .overlays import (
-    BATTERIES_CHECKER,
-    BLINK_COUNT,
-    COLOR_MEMORY,
-    DISABLE_REWARD_OVERLAY_ENV_VAR,
-    INTERCEPT,
-    MEMORY_CAPACITY,
-    OVERLAY_CHAINS,
-    ROTATE,
-    SHAPE_COLOR_MEMORY,
-    SHAPE_MEMORY,
-    SHELL_GAME,
-    STEP_REWARD,
-    TIMED_TRANSFER,
-    TRACE_SHAPE,
-    DebugRewardWrapper,
-    MemoryCapacityInfoWrapper,
-    RememberColorInfoWrapper,
-    RememberShapeAndColorInfoWrapper,
-    RememberShapeInfoWrapper,
-    RenderPressProgressInfoWrapper,
-    RenderRewardInfoWrapper,
-    RenderStepInfoWrapper,
-    RenderTimedTransferInfoWrapper,
-    RenderTraceShapeDebugWrapper,
-    RenderWorkingBatteriesInfoWrapper,
-    RotateRenderAngleInfoWrapper,
-    ShellGameRenderCupInfoWrapper,
-    reward_overlay_disabled,
-)
-from .wrappers import (
-    MISSING_VALUE_SENTINEL,
-    CameraShutdownWrapper,
-    ConvertJointsToEEFXyzRpyGripperWrapper,
-    CurriculumPhaseNoopActionWrapper,
-    CurriculumPhaseNoopActionWrapperPdJointPos,
-    FlattenRGBDObservationWrapper,
-    InitialZeroActionWrapper,
-    StateOnlyTensorToDictWrapper,
-)
+# Each module's __all__ is its public API; the package re-exports all three.
+from . import apply_wrappers, overlays, wrappers
+from .apply_wrappers import *  # noqa: F403
+from .overlays import *  # noqa: F403
+from .wrappers import *  # noqa: F403
 
 __version__ = "0.1.0"
 
-__all__ = [
-    # chain
-    "apply_mikasa_vla_wrappers",
-    "VLAWrapperConfig",
-    "VLA_WRAPPER_CONFIGS",
-    "MIKASA_VLA_ENV_IDS",
-    "REQUIRED_OBS_MODE",
-    # wrappers
-    "MISSING_VALUE_SENTINEL",
-    "StateOnlyTensorToDictWrapper",
-    "CurriculumPhaseNoopActionWrapper",
-    "CurriculumPhaseNoopActionWrapperPdJointPos",
-    "InitialZeroActionWrapper",
-    "CameraShutdownWrapper",
-    "FlattenRGBDObservationWrapper",
-    "ConvertJointsToEEFXyzRpyGripperWrapper",
-    # overlays
-    "RenderStepInfoWrapper",
-    "RenderRewardInfoWrapper",
-    "RememberColorInfoWrapper",
-    "RememberShapeInfoWrapper",
-    "RememberShapeAndColorInfoWrapper",
-    "ShellGameRenderCupInfoWrapper",
-    "RotateRenderAngleInfoWrapper",
-    "MemoryCapacityInfoWrapper",
-    "RenderWorkingBatteriesInfoWrapper",
-    "RenderPressProgressInfoWrapper",
-    "RenderTraceShapeDebugWrapper",
-    "RenderTimedTransferInfoWrapper",
-    "DebugRewardWrapper",
-    "DISABLE_REWARD_OVERLAY_ENV_VAR",
-    "reward_overlay_disabled",
-    "OVERLAY_CHAINS",
-    "COLOR_MEMORY",
-    "SHAPE_MEMORY",
-    "SHAPE_COLOR_MEMORY",
-    "SHELL_GAME",
-    "INTERCEPT",
-    "ROTATE",
-    "MEMORY_CAPACITY",
-    "BATTERIES_CHECKER",
-    "BLINK_COUNT",
-    "TRACE_SHAPE",
-    "TIMED_TRANSFER",
-    "STEP_REWARD",
-    "__version__",
-]
+__all__ = [*apply_wrappers.__all__, *wrappers.__all__, *overlays.__all__, "__version__"]

@@ -22,6 +22,7 @@ __all__ = [
     "VLA_WRAPPER_CONFIGS",
     "MIKASA_VLA_ENV_IDS",
     "apply_mikasa_vla_wrappers",
+    "apply_chain_head",
     "REQUIRED_OBS_MODE",
 ]
 
@@ -155,6 +156,21 @@ def _find_max_episode_steps(env: gym.Env) -> int | None:
     return int(value) if value is not None else None
 
 
+def apply_chain_head(
+    env: gym.Env, config: VLAWrapperConfig, *, include_overlays: bool = False
+) -> gym.Env:
+    """The first links of the canonical chain: observation dict, the task's action
+    (curriculum) wrapper and, with ``include_overlays``, its render overlays. Chains that
+    flatten observations differently (e.g. mikasa-bench's state-mode chain) start here."""
+    wrapped: gym.Env = StateOnlyTensorToDictWrapper(env)
+    if config.curriculum_wrapper is not None:
+        wrapped = config.curriculum_wrapper(wrapped)
+    if include_overlays:
+        for overlay in config.overlays:
+            wrapped = overlay(wrapped)
+    return wrapped
+
+
 def _apply_config(
     env: gym.Env,
     config: VLAWrapperConfig,
@@ -183,12 +199,7 @@ def _apply_config(
             stacklevel=3,
         )
 
-    wrapped: gym.Env = StateOnlyTensorToDictWrapper(env)
-    if config.curriculum_wrapper is not None:
-        wrapped = config.curriculum_wrapper(wrapped)
-    if include_overlays:
-        for overlay in config.overlays:
-            wrapped = overlay(wrapped)
+    wrapped = apply_chain_head(env, config, include_overlays=include_overlays)
     wrapped = FlattenRGBDObservationWrapper(
         wrapped, rgb=True, depth=False, state=False, oracle=False, joints=True
     )

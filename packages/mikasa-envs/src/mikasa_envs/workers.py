@@ -1,0 +1,75 @@
+"""Worker processes that own envs: the loop and the shutdown shared by the process pools
+of mikasa-bench (evaluation) and mikasa-oracles (demonstration collection).
+
+A pool starts its workers with the ``spawn`` method (a fresh interpreter: SAPIEN and
+Vulkan do not survive ``fork``). Each worker builds its state once, then runs jobs from its
+inbox and puts ``("done", worker_id, result)`` on the shared outbox until it gets ``None``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+import signal
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+__all__ = ["JobRunner", "serve_jobs", "stop_processes"]
+
+
+class JobRunner(Protocol):
+    """What a worker's state offers: ``run(job) -> result`` and ``close()``."""
+
+    def run(self, job: Any) -> Any: ...
+
+    def close(self) -> None: ...
+
+
+def serve_jobs(worker_id: int, inbox: Any, outbox: Any, start: Callable[[], JobRunner]) -> None:
+    """The body of a worker process.
+
+    Ignores Ctrl-C (it reaches the whole process group; the parent decides and stops the
+    pool). ``start()`` builds the worker's state; if it raises, the traceback goes to the
+    parent as ``("fatal", worker_id, text)``; else ``("ready", worker_id, None)`` is sent.
+    A worker whose parent died (kill -9) exits instead of idling forever.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        runner = start()
+    except BaseException:
+        outbox.put(("fatal", worker_id, traceback.format_exc()))
+        return
+    outbox.put(("ready", worker_id, None))
+    parent = mp.parent_process()
+    try:
+        while True:
+            try:
+                job = inbox.get(timeout=1.0)
+            except queue.Empty:
+                if parent is not None and not parent.is_alive():
+                    break
+                continue
+            if job is None:
+                break
+            outbox.put(("done", worker_id, runner.run(job)))
+    finally:
+        runner.close()
+
+
+def stop_processes(processes: Sequence[Any], *, wait_s: float = 0.0) -> None:
+    """Wait up to ``wait_s`` in all for ``processes`` to exit (after the caller sent them
+    ``None``), then terminate, and finally kill, any still running."""
+    deadline = time.monotonic() + wait_s
+    if wait_s > 0:
+        for p in processes:
+            p.join(timeout=max(0.1, deadline - time.monotonic()))
+    for p in processes:
+        if p.is_alive():
+            p.terminate()
+    for p in processes:
+        p.join(timeout=5)
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=5)
