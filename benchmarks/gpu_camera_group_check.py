@@ -1,5 +1,6 @@
 """GPU check: the camera-group path (mikasa_envs/camera_group.py) gives the same pixels as
-ManiSkill's per-camera path, step for step, with random actions.
+ManiSkill's per-camera path, step for step, with random actions; so do envs stepped by
+several threads whose cameras render in shared passes (mikasa_envs/render_batcher.py).
 
     python benchmarks/gpu_camera_group_check.py RememberColor3-VLA-v0 FindImposterShape5-VLA-v0
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 
 import gymnasium as gym
 import mikasa_envs  # noqa: F401  (registers the envs)
@@ -56,9 +58,63 @@ def compare(env_id: str) -> int:
     return max(largest)
 
 
+def _episode_images(env: gym.Env, seed: int, out: list[np.ndarray]) -> None:
+    """Reset with ``seed``, then `STEPS` random steps (drawn from ``seed``): every rgb."""
+    from mikasa_envs.render_batcher import participating
+
+    rng = np.random.default_rng(seed)
+    with participating():
+        out.append(env.reset(seed=seed)[0]["rgb"].cpu().numpy())
+        for _ in range(STEPS):
+            action = rng.uniform(-1, 1, 7).astype(np.float32)
+            out.append(env.step(action)[0]["rgb"].cpu().numpy())
+
+
+def compare_threads(env_ids: list[str], threads: int = 4) -> int:
+    """Largest pixel difference between envs stepped by ``threads`` threads sharing render
+    passes (tasks mixed) and the same episodes run one by one on ManiSkill's path."""
+    from mikasa_envs import render_batcher
+
+    ids = [env_ids[k % len(env_ids)] for k in range(threads)]
+    reference = []
+    for k, env_id in enumerate(ids):
+        env = make(env_id, False)
+        frames: list[np.ndarray] = []
+        _episode_images(env, 100 + k, frames)
+        reference.append(frames)
+        env.close()
+    batcher = render_batcher.install_batcher()
+    try:
+        envs = [make(env_id, True) for env_id in ids]
+        batched: list[list[np.ndarray]] = [[] for _ in ids]
+        workers = [
+            threading.Thread(target=_episode_images, args=(env, 100 + k, batched[k]))
+            for k, env in enumerate(envs)
+        ]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        passes, pictures = batcher.passes, batcher.pictures
+        for env in envs:
+            env.close()
+    finally:
+        render_batcher.uninstall_batcher()
+    worst = 0
+    for k, env_id in enumerate(ids):
+        if len(batched[k]) != len(reference[k]):
+            raise SystemExit(f"thread {k} ({env_id}) did not finish its episode")
+        diffs = [int(np.abs(a.astype(np.int16) - b).max()) for a, b in zip(reference[k], batched[k])]
+        worst = max(worst, *diffs)
+        print(f"thread {k} {env_id}: largest pixel difference per step {diffs}", flush=True)
+    print(f"{threads} threads: {pictures} pictures in {passes} shared passes", flush=True)
+    return worst
+
+
 def main() -> int:
-    """Compare every env id given on the command line."""
-    worst = max(compare(env_id) for env_id in sys.argv[1:] or ["RememberColor3-VLA-v0"])
+    """Compare every env id given on the command line, alone and in shared passes."""
+    env_ids = sys.argv[1:] or ["RememberColor3-VLA-v0"]
+    worst = max(max(compare(env_id) for env_id in env_ids), compare_threads(env_ids))
     ok = worst <= TOLERANCE
     print("CAMERA GROUP CHECK", "OK" if ok else "DIFFERS", f"(largest difference {worst}/255)")
     return 0 if ok else 1

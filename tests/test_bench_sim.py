@@ -71,6 +71,15 @@ def test_workers_1_and_2_give_identical_episodes(baseline, tmp_path):
     assert {k: a[k] for k in PER_EPISODE} == {k: b[k] for k in PER_EPISODE}
 
 
+def test_two_envs_per_worker_give_identical_episodes(baseline, tmp_path):
+    # One process, two env threads (on a GPU they would share render passes).
+    out = tmp_path / "w1x2"
+    argv = ["run", *COMMON, "--policy", "oracle", "--workers", "1", "--envs-per-worker", "2"]
+    assert cli.main([*argv, "--out", str(out)]) == 0
+    a, b = _task_json(baseline), _task_json(out)
+    assert {k: a[k] for k in PER_EPISODE} == {k: b[k] for k in PER_EPISODE}
+
+
 def test_resume_after_interruption_loses_and_duplicates_nothing(baseline, tmp_path):
     # Pre-write an interrupted run: episode 0 journaled (with a marker wall time),
     # episode 1 torn mid-write by kill -9.

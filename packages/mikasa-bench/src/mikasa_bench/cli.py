@@ -220,6 +220,14 @@ def _add_exec_args(p: argparse.ArgumentParser, default_workers: int | None) -> N
         help="Ray cluster to join (default: $RAY_ADDRESS, else start Ray locally); "
         "with --executor ray, --workers defaults to the cluster's CPU count",
     )
+    p.add_argument(
+        "--envs-per-worker",
+        type=int,
+        default=1,
+        metavar="K",
+        help="envs each local worker process runs, one thread each (default 1); on a GPU "
+        "their cameras render in shared passes, which is what a many-worker GPU run needs",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -328,12 +336,16 @@ def _execute_and_report(
     from .results import load_run
     from .runner import execute_runs
 
-    executor = make_executor(args.executor, args.workers, address=args.address)
+    executor = make_executor(
+        args.executor, args.workers, address=args.address, envs_per_worker=args.envs_per_worker
+    )
     dirs = ", ".join(str(s.run_dir) for s in stores)
     pending = sum(len(s.pending()) for s in stores)
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
     desc = executor.describe()
     details = [f"{desc['workers']} workers"] if "workers" in desc else []
+    if desc.get("envs_per_worker", 1) > 1:
+        details.append(f"{desc['envs_per_worker']} envs each")
     if "address" in desc:
         details.append(f"Ray at {desc['address']}")
     details.append(f"render {stores[0].config.render_description()}")

@@ -7,9 +7,10 @@ produces the same numbers.
 
 from __future__ import annotations
 
+import contextlib
 import random
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +22,7 @@ from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 
 __all__ = [
     "EpisodeResult",
+    "EpisodeRngs",
     "make_benchmark_env",
     "normalize_action_chunk",
     "run_episode",
@@ -47,6 +49,59 @@ def seed_global_rngs(seed: int) -> None:
     random.seed(s)
     np.random.seed(s)
     torch.manual_seed(s)
+
+
+def _global_rng_states() -> tuple[Any, ...]:
+    import torch
+
+    cuda = torch.cuda.get_rng_state_all() if torch.cuda.is_initialized() else None
+    return random.getstate(), np.random.get_state(), torch.get_rng_state(), cuda
+
+
+def _set_global_rng_states(states: tuple[Any, ...]) -> None:
+    import torch
+
+    py, np_state, cpu, cuda = states
+    random.setstate(py)
+    np.random.set_state(np_state)
+    torch.set_rng_state(cpu)
+    if cuda is not None:
+        torch.cuda.set_rng_state_all(cuda)
+
+
+class EpisodeRngs:
+    """One episode's own copy of the global RNG states (seeded with the episode seed),
+    swapped in around the policy's calls.
+
+    Episodes that run in threads of one process (``--envs-per-worker``) share Python's,
+    numpy's and torch's global RNGs; a policy drawing from them would get numbers that
+    depend on the other threads. Inside `active` it sees exactly the sequence a process of
+    its own would give it.
+    """
+
+    def __init__(self, seed: int) -> None:
+        with self._swapped(None):
+            seed_global_rngs(seed)
+
+    @contextlib.contextmanager
+    def active(self) -> Iterator[None]:
+        """The episode's RNG states are the global ones for the duration of the block."""
+        with self._swapped(self._states):
+            yield
+
+    @contextlib.contextmanager
+    def _swapped(self, states: tuple[Any, ...] | None) -> Iterator[None]:
+        from mikasa_envs.render_batcher import global_rng_section
+
+        with global_rng_section():
+            saved = _global_rng_states()
+            if states is not None:
+                _set_global_rng_states(states)
+            try:
+                yield
+            finally:
+                self._states = _global_rng_states()
+                _set_global_rng_states(saved)
 
 
 def _first(x: Any) -> Any:
@@ -120,6 +175,7 @@ def run_episode(
     reset_policy_hook: bool = True,
     collect_video: bool = False,
     frame_sink: Callable[[np.ndarray], None] | None = None,
+    own_global_rngs: bool = False,
 ) -> tuple[EpisodeResult, list[np.ndarray] | None]:
     """Run one episode of ``env`` (already wrapped, ``num_envs=1``) with ``policy``.
 
@@ -134,10 +190,18 @@ def run_episode(
     ``collect_video=True`` returns them as a list instead of None (memory grows with the
     episode length: the runner streams to an encoder through ``frame_sink``). Rendering
     the scene view does not touch the simulation, so results are the same either way.
+
+    ``own_global_rngs`` (for episodes run in threads of one process): the policy's calls
+    see the episode's own global RNG states (`EpisodeRngs`) instead of the process's.
     """
     import torch
 
-    seed_global_rngs(episode_seed)
+    if own_global_rngs:
+        rngs = EpisodeRngs(episode_seed)
+        policy_rngs: Callable[[], Any] = rngs.active
+    else:
+        seed_global_rngs(episode_seed)
+        policy_rngs = contextlib.nullcontext
     obs, _ = env.reset(seed=int(episode_seed))
     max_steps = getattr(env, "max_episode_steps", None)
     if max_steps is None:
@@ -146,7 +210,8 @@ def run_episode(
             "apply_mikasa_vla_wrappers (or make_benchmark_env)"
         )
     if reset_policy_hook:
-        reset_policy(policy, episode_seed)
+        with policy_rngs():
+            reset_policy(policy, episode_seed)
     action_shape = tuple(env.action_space.shape)
     device = getattr(env.unwrapped, "device", None) or torch.device("cpu")
     frames: list[np.ndarray] | None = [] if collect_video else None
@@ -162,7 +227,9 @@ def run_episode(
         if sink is not None:
             sink(compose_frame(env.render(), obs))
         if not queue:
-            queue.extend(normalize_action_chunk(policy.forward(obs), action_shape))
+            with policy_rngs():
+                output = policy.forward(obs)
+            queue.extend(normalize_action_chunk(output, action_shape))
         action = queue.popleft().to(device=device, dtype=torch.float32).unsqueeze(0)
         obs, reward, terminated, truncated, info = env.step(action)
         n_steps += 1

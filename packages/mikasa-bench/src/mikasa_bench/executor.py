@@ -26,6 +26,7 @@ workers on other machines.
 from __future__ import annotations
 
 import logging
+import math
 import multiprocessing as mp
 import os
 import queue
@@ -110,12 +111,16 @@ class EpisodeOutcome:
 class _EpisodeWorker:
     """Per-process worker state: one cached env and the policies built for it.
 
-    ``worker_id`` is the worker's index in its pool; it decides the render device of a
-    mixed pool (`BenchmarkConfig.render_device_for`).
+    ``worker_id`` is the worker's index in its pool; ``process_index`` (default: the same)
+    is its process's, which decides the render device of a mixed pool
+    (`BenchmarkConfig.render_device_for`).
     """
 
-    def __init__(self, worker_id: int) -> None:
+    def __init__(self, worker_id: int, process_index: int | None = None, threaded: bool = False) -> None:
         self.worker_id = worker_id
+        self.process_index = worker_id if process_index is None else process_index
+        self.threaded = threaded
+        """Shares its process with other workers' threads (episodes keep their own RNGs)."""
         self.env: Any = None
         self.env_key: Hashable | None = None
         self.policies: dict[str, Any] = {}
@@ -124,7 +129,7 @@ class _EpisodeWorker:
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
             self.close()
-            device = job.config.render_device_for(self.worker_id)
+            device = job.config.render_device_for(self.process_index)
             config = replace(job.config, render_device=device, gpu_render_workers=0)
             self.env = make_benchmark_env(job.task.env_id, config)
             self.env_key = job.env_key
@@ -140,6 +145,10 @@ class _EpisodeWorker:
     def run(self, job: EpisodeJob) -> EpisodeOutcome:
         """Run one job; exceptions become an outcome with ``error`` set."""
         t0 = time.perf_counter()
+        # The episode (not the env build) takes part in shared render passes when this
+        # process runs several workers (mikasa_envs.render_batcher); else a no-op.
+        from mikasa_envs.render_batcher import participating
+
         try:
             env = self._env_for(job)
             policy = self._policy_for(job, env)
@@ -151,10 +160,14 @@ class _EpisodeWorker:
                 from .video import EpisodeVideo
 
                 with EpisodeVideo() as recorder:
-                    result, _ = run_episode(env, policy, job.seed, frame_sink=recorder.add)
+                    with participating():
+                        result, _ = run_episode(
+                            env, policy, job.seed, frame_sink=recorder.add, own_global_rngs=self.threaded
+                        )
                     video = recorder.finish()
             else:
-                result, _ = run_episode(env, policy, job.seed)
+                with participating():
+                    result, _ = run_episode(env, policy, job.seed, own_global_rngs=self.threaded)
             return EpisodeOutcome(
                 job,
                 result,
@@ -278,18 +291,21 @@ def _quiet_worker() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
-def _start_worker(worker_id: int, env_vars: dict[str, str]) -> _EpisodeWorker:
+def _start_worker(process_index: int, threaded: bool, worker_id: int) -> _EpisodeWorker:
+    _quiet_worker()
+    return _EpisodeWorker(worker_id, process_index, threaded)
+
+
+def _worker_main(
+    process_index: int, worker_ids: list[int], inboxes: list[Any], outbox: Any, env_vars: dict[str, str]
+) -> None:
+    """Entry point of a `LocalExecutor` worker process (one or more workers, a thread each)."""
     # Before anything can initialise Vulkan: the render device's driver restriction.
     apply_environment(env_vars)
-    _quiet_worker()
-    return _EpisodeWorker(worker_id)
+    from mikasa_envs.workers import serve_job_slots  # imported lazily: mikasa_envs loads ManiSkill
 
-
-def _worker_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, str]) -> None:
-    """Entry point of a `LocalExecutor` worker process."""
-    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
-
-    serve_jobs(worker_id, inbox, outbox, partial(_start_worker, worker_id, env_vars))
+    start = partial(_start_worker, process_index, len(worker_ids) > 1)
+    serve_job_slots(worker_ids, inboxes, outbox, start)
 
 
 class _Scheduler:
@@ -335,21 +351,26 @@ class _Handle:
 
 
 class LocalExecutor(Executor):
-    """A pool of ``workers`` spawn-started processes on this machine."""
+    """A pool of ``workers`` spawn-started processes on this machine, each running
+    ``envs_per_worker`` envs (one thread each; on a GPU their cameras render in shared
+    passes, `mikasa_envs.render_batcher`)."""
 
     name = "local"
 
-    def __init__(self, workers: int | None = None) -> None:
+    def __init__(self, workers: int | None = None, envs_per_worker: int = 1) -> None:
         n = workers if workers is not None else available_cores()
         if n < 1:
             raise BenchError(f"--workers must be >= 1 for the local executor, got {n}")
+        if envs_per_worker < 1:
+            raise BenchError(f"--envs-per-worker must be >= 1, got {envs_per_worker}")
         self.workers = int(n)
+        self.envs_per_worker = int(envs_per_worker)
         self.startup_s: float | None = None
         """Seconds until every worker had imported the simulator (set by `run`)."""
 
     def describe(self) -> dict[str, Any]:
-        """Name and worker count."""
-        return {"name": self.name, "workers": self.workers}
+        """Name, process count and envs per process."""
+        return {"name": self.name, "workers": self.workers, "envs_per_worker": self.envs_per_worker}
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[EpisodeOutcome]:
         """Start the pool, feed it, yield outcomes; always stops the workers."""
@@ -362,20 +383,22 @@ class LocalExecutor(Executor):
         scheduler = _Scheduler(jobs)
         clean = False
         config = render_config(jobs)
-        n = min(self.workers, len(jobs))
+        k = min(self.envs_per_worker, len(jobs))
+        n = min(self.workers, math.ceil(len(jobs) / k))
         t_start = time.perf_counter()
-        not_ready = n
+        not_ready = n * k
         try:
-            for wid in range(n):
-                inbox = ctx.Queue()
+            for index in range(n):
+                ids = list(range(index * k, (index + 1) * k))
+                inboxes = [ctx.Queue() for _ in ids]
                 p = ctx.Process(
                     target=_worker_main,
-                    args=(wid, inbox, outbox, worker_env_vars(config, wid, n)),
+                    args=(index, ids, inboxes, outbox, worker_env_vars(config, index, n)),
                     daemon=True,
-                    name=f"mikasa-bench-worker-{wid}",
+                    name=f"mikasa-bench-worker-{index}",
                 )
                 p.start()
-                handles.append(_Handle(p, inbox))
+                handles.extend(_Handle(p, inbox) for inbox in inboxes)
             for h in handles:
                 self._assign(h, scheduler)
             remaining = len(jobs)
@@ -431,7 +454,8 @@ class LocalExecutor(Executor):
         # were running are not recorded and will be rerun by --resume.
         from mikasa_envs.workers import stop_processes
 
-        stop_processes([h.process for h in handles], wait_s=30 if graceful else 0)
+        processes = list({id(h.process): h.process for h in handles}.values())
+        stop_processes(processes, wait_s=30 if graceful else 0)
 
 
 def _ray_executor(workers: int | None = None, address: str | None = None) -> Executor:
@@ -450,18 +474,25 @@ EXECUTORS: dict[str, Any] = {
 
 
 def make_executor(
-    name: str = "local", workers: int | None = None, *, address: str | None = None
+    name: str = "local",
+    workers: int | None = None,
+    *,
+    address: str | None = None,
+    envs_per_worker: int = 1,
 ) -> Executor:
     """Build an executor by name (``workers == 0`` selects `InlineExecutor`; ``address``
-    is the Ray cluster to join, default: ``RAY_ADDRESS`` or a new local instance)."""
+    is the Ray cluster to join, default: ``RAY_ADDRESS`` or a new local instance;
+    ``envs_per_worker`` is the local pool's envs per process)."""
     if name not in EXECUTORS:
         raise BenchError(f"unknown executor {name!r}; expected one of {', '.join(EXECUTORS)}")
     if address is not None and name != "ray":
         raise BenchError("--address is only used by --executor ray")
+    if envs_per_worker != 1 and (name != "local" or workers == 0):
+        raise BenchError("--envs-per-worker is only used by the local executor with --workers >= 1")
     if name == "ray":
         if workers == 0:
             raise BenchError("--workers 0 (run in this process) cannot be used with Ray")
         return _ray_executor(workers, address)
     if name == "inline" or workers == 0:
         return InlineExecutor()
-    return LocalExecutor(workers)
+    return LocalExecutor(workers, envs_per_worker)

@@ -20,7 +20,8 @@ from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
 
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
-from mikasa_envs.camera_group import CameraGroupRenderer
+from mikasa_envs import render_batcher
+from mikasa_envs.camera_group import CameraGroupRenderer, env_cameras, env_render_device
 from mikasa_envs.robot import LightPandaWristCam
 
 ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
@@ -80,7 +81,8 @@ class MikasaVLABaseEnv(BaseEnv):
         self.oracle_info: torch.Tensor | None = None
         self._reward_dict: dict[str, torch.Tensor] | None = None
         self._camera_group: CameraGroupRenderer | None = None
-        self._camera_group_unsupported: object = None  # the scene a group failed for
+        self._camera_group_checked: object = None  # the scene `_camera_group_ok` is about
+        self._camera_group_ok = False
         try:
             super().__init__(*args, robot_uids=robot_uids, **kwargs)
         except AssertionError as err:
@@ -132,31 +134,39 @@ class MikasaVLABaseEnv(BaseEnv):
         self._human_render_cameras = dict()
         self.scene = None
         self._camera_group = None
-        self._camera_group_unsupported = None
+        self._camera_group_checked = None
+        batcher = render_batcher.active_batcher()
+        if batcher is not None:
+            batcher.forget(self)
         self._hidden_objects = []
         if had_scene:
             gc.collect()
 
     # ------------------------------------------------------------ rendering
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
-        # CPU physics with GPU rendering: both cameras in one batched pass (camera_group.py).
-        group = self._sensor_camera_group() if apply_texture_transforms else None
-        if group is None:
+        # CPU physics with GPU rendering: both cameras in one batched pass (camera_group.py);
+        # envs stepped by several threads of one process share passes (render_batcher.py).
+        if not (apply_texture_transforms and self._camera_group_supported()):
             return super()._get_obs_sensor_data(apply_texture_transforms)
-        return {name: {"rgb": image} for name, image in group.render().items()}
-
-    def _sensor_camera_group(self) -> CameraGroupRenderer | None:
-        scene = self.scene.sub_scenes[0] if self.scene is not None else None
-        if self._camera_group is not None and self._camera_group.scene is scene:
-            return self._camera_group
-        self._camera_group = None
-        if scene is None or self._camera_group_unsupported is scene:
-            return None
-        if CameraGroupRenderer.supported(self):
-            self._camera_group = CameraGroupRenderer.for_env(self)
+        batcher = render_batcher.active_batcher()
+        if batcher is not None:
+            images = batcher.render(self, env_cameras(self), env_render_device(self))
         else:
-            self._camera_group_unsupported = scene
-        return self._camera_group
+            scene = self.scene.sub_scenes[0]
+            if self._camera_group is None or self._camera_group.scene is not scene:
+                self._camera_group = CameraGroupRenderer.for_env(self)
+            images = self._camera_group.render()
+        return {name: {"rgb": image} for name, image in images.items()}
+
+    def _camera_group_supported(self) -> bool:
+        """Whether this env's current scene renders through a camera group (cached per scene)."""
+        scene = self.scene.sub_scenes[0] if self.scene is not None else None
+        if scene is None:
+            return False
+        if self._camera_group_checked is not scene:
+            self._camera_group_ok = CameraGroupRenderer.supported(self)
+            self._camera_group_checked = scene
+        return self._camera_group_ok
 
     # ------------------------------------------------------------- episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:
@@ -221,6 +231,12 @@ class MikasaVLABaseEnv(BaseEnv):
         return cue, ~cue & ~action, action
 
     # ------------------------------------------------------------- stepping
+    def reset(self, seed: Any = None, options: dict | None = None):
+        """ManiSkill's reset, one thread at a time: it reseeds and draws from torch's
+        global RNG (render_batcher.global_rng_section)."""
+        with render_batcher.global_rng_section():
+            return super().reset(seed=seed, options=options)
+
     def step(self, action: Any):
         """ManiSkill's step with input checks; episodes end only by truncation."""
         self._check_action(action)

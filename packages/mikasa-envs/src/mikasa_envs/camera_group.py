@@ -29,6 +29,7 @@ turns it off.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -53,10 +54,12 @@ def camera_group_enabled() -> bool:
     return os.environ.get(CAMERA_GROUP_ENV_VAR, "1").strip().lower() not in {"0", "false", "no", "off"}
 
 
-def assign_pose_rows(scene: sapien.Scene, cameras: list[sapien.render.RenderCameraComponent]) -> np.ndarray:
+def assign_pose_rows(
+    scene: sapien.Scene, cameras: list[sapien.render.RenderCameraComponent], first_row: int = 0
+) -> np.ndarray:
     """Give every render shape and camera of ``scene`` a row of the group's pose buffer,
-    one row per entity they hang on; return, for each row, the entity's index in
-    ``scene.entities`` (the order of ``Scene.pack_poses``)."""
+    one row per entity they hang on, numbered from ``first_row``; return, for each row, the
+    entity's index in ``scene.entities`` (the order of ``Scene.pack_poses``)."""
     # Keyed by global id: Python wrappers of SAPIEN objects are not unique.
     entity_index = {e.global_id: i for i, e in enumerate(scene.entities)}
     rows: list[int] = []
@@ -65,7 +68,7 @@ def assign_pose_rows(scene: sapien.Scene, cameras: list[sapien.render.RenderCame
     def row(entity: sapien.Entity) -> int:
         key = entity.global_id
         if key not in row_of:
-            row_of[key] = len(rows)
+            row_of[key] = first_row + len(rows)
             rows.append(entity_index[key])
         return row_of[key]
 
@@ -95,44 +98,58 @@ def check_pose_layout(scene: sapien.Scene) -> None:
             raise RuntimeError("Scene.pack_poses() layout is not [q, p] per entity")
 
 
-class CameraGroupRenderer:
-    """Renders named cameras of one SAPIEN scene together on the GPU; returns uint8 RGB."""
+SceneCameras = tuple[sapien.Scene, dict[str, sapien.render.RenderCameraComponent]]
+"""A scene and its cameras by name."""
 
-    def __init__(
-        self,
-        scene: sapien.Scene,
-        cameras: dict[str, sapien.render.RenderCameraComponent],
-        device: torch.device | str = "cuda",
-    ):
-        self.scene = scene
-        self.names = list(cameras)
-        cams = [cameras[n] for n in self.names]
+
+class CameraGroupRenderer:
+    """Renders named cameras of one or more SAPIEN scenes together on the GPU, in one pass;
+    returns uint8 RGB on the CPU."""
+
+    def __init__(self, views: Sequence[SceneCameras], device: torch.device | str = "cuda"):
+        if not views:
+            raise ValueError("a camera group needs at least one scene")
+        self.scenes = [scene for scene, _ in views]
+        self.names = [list(cameras) for _, cameras in views]
+        cams = [cam for _, cameras in views for cam in cameras.values()]
         sizes = {(c.width, c.height) for c in cams}
         if len(sizes) != 1:
             raise ValueError(f"a camera group needs cameras of one size, got {sorted(sizes)}")
         self.width, self.height = sizes.pop()
 
-        self._rows = assign_pose_rows(scene, cams)
-        check_pose_layout(scene)
-        scene.update_render()  # the render system's own first update, before the group exists
+        # Each scene's rows of the shared pose buffer: (first row, entity index per row).
+        self._rows: list[tuple[int, np.ndarray]] = []
+        n_rows = 0
+        for scene, cameras in views:
+            rows = assign_pose_rows(scene, list(cameras.values()), first_row=n_rows)
+            self._rows.append((n_rows, rows))
+            n_rows += len(rows)
+            check_pose_layout(scene)
+            scene.update_render()  # the render system's own first update, before the group exists
 
         self._stream = torch.cuda.current_stream(device)
-        self._host_poses = torch.zeros((len(self._rows), _POSE_ROW_WIDTH), dtype=torch.float32).pin_memory()
+        self._host_poses = torch.zeros((n_rows, _POSE_ROW_WIDTH), dtype=torch.float32).pin_memory()
         self._host_np = self._host_poses.numpy()
-        self._device_poses = torch.zeros((len(self._rows), _POSE_ROW_WIDTH), dtype=torch.float32, device=device)
-        self._group = sapien.render.RenderSystemGroup([scene.render_system])
+        self._device_poses = torch.zeros((n_rows, _POSE_ROW_WIDTH), dtype=torch.float32, device=device)
+        self._group = sapien.render.RenderSystemGroup([scene.render_system for scene in self.scenes])
         self._group.set_cuda_poses(sapien.pysapien.CudaArray(self._device_poses))
         self._group.set_cuda_stream(self._stream.cuda_stream)
         self._cameras = self._group.create_camera_group(cams, ["Color"])
         self._images = torch.zeros((len(cams), self.height, self.width, 3), dtype=torch.uint8).pin_memory()
         self._copied = torch.cuda.Event(blocking=True)  # waited on without spinning a core
 
-    def render(self) -> dict[str, torch.Tensor]:
-        """Render every camera at the scene's current poses: name -> uint8 [1, H, W, 3] on the
-        CPU, with the rest of a CPU-simulated env's observation."""
-        packed = packed_poses(self.scene)[self._rows]
-        self._host_np[:, 0:3] = packed[:, 4:7]
-        self._host_np[:, 3:7] = packed[:, 0:4]
+    @property
+    def scene(self) -> sapien.Scene:
+        """The first (for a single-scene group: the) scene."""
+        return self.scenes[0]
+
+    def render_all(self) -> list[dict[str, torch.Tensor]]:
+        """Render every camera at its scene's current poses: per scene, name -> uint8
+        [1, H, W, 3] on the CPU, with the rest of a CPU-simulated env's observation."""
+        for scene, (first, rows) in zip(self.scenes, self._rows):
+            packed = packed_poses(scene)[rows]
+            self._host_np[first : first + len(rows), 0:3] = packed[:, 4:7]
+            self._host_np[first : first + len(rows), 3:7] = packed[:, 0:4]
         self._device_poses.copy_(self._host_poses, non_blocking=True)
         self._group.update_render()
         self._cameras.take_picture()
@@ -141,7 +158,15 @@ class CameraGroupRenderer:
         self._copied.record(self._stream)
         self._copied.synchronize()
         # Clones: the pinned buffer is reused by the next render.
-        return {name: self._images[i : i + 1].clone() for i, name in enumerate(self.names)}
+        out, i = [], 0
+        for names in self.names:
+            out.append({name: self._images[i + j : i + j + 1].clone() for j, name in enumerate(names)})
+            i += len(names)
+        return out
+
+    def render(self) -> dict[str, torch.Tensor]:
+        """`render_all` for a single-scene group: name -> uint8 [1, H, W, 3] on the CPU."""
+        return self.render_all()[0]
 
     @staticmethod
     def supported(env: Any) -> bool:
@@ -168,6 +193,16 @@ class CameraGroupRenderer:
     @classmethod
     def for_env(cls, env: Any) -> CameraGroupRenderer:
         """The renderer for a ManiSkill env's sensors (call `supported` first)."""
-        cameras = {name: s.camera._render_cameras[0] for name, s in env.scene.sensors.items()}
-        device = torch.device("cuda", env.backend.render_device.cuda_id)
-        return cls(env.scene.sub_scenes[0], cameras, device)
+        return cls([env_cameras(env)], env_render_device(env))
+
+
+def env_cameras(env: Any) -> SceneCameras:
+    """A ManiSkill env's (one) scene and its sensor cameras by name."""
+    cameras = {name: s.camera._render_cameras[0] for name, s in env.scene.sensors.items()}
+    return env.scene.sub_scenes[0], cameras
+
+
+def env_render_device(env: Any) -> torch.device:
+    """The CUDA device a ManiSkill env renders on."""
+    return torch.device("cuda", env.backend.render_device.cuda_id)
+

@@ -4,6 +4,9 @@ of mikasa-bench (evaluation) and mikasa-oracles (demonstration collection).
 A pool starts its workers with the ``spawn`` method (a fresh interpreter: SAPIEN and
 Vulkan do not survive ``fork``). Each worker builds its state once, then runs jobs from its
 inbox and puts ``("done", worker_id, result)`` on the shared outbox until it gets ``None``.
+
+A process may serve several workers ("slots"), one thread each with its own inbox and
+state (`serve_job_slots`): their envs then share GPU render passes (`render_batcher`).
 """
 
 from __future__ import annotations
@@ -11,12 +14,13 @@ from __future__ import annotations
 import multiprocessing as mp
 import queue
 import signal
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-__all__ = ["JobRunner", "serve_jobs", "stop_processes"]
+__all__ = ["JobRunner", "serve_job_slots", "serve_jobs", "stop_processes"]
 
 
 class JobRunner(Protocol):
@@ -36,6 +40,47 @@ def serve_jobs(worker_id: int, inbox: Any, outbox: Any, start: Callable[[], JobR
     A worker whose parent died (kill -9) exits instead of idling forever.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _serve(worker_id, inbox, outbox, start)
+
+
+def serve_job_slots(
+    worker_ids: Sequence[int],
+    inboxes: Sequence[Any],
+    outbox: Any,
+    start: Callable[[int], JobRunner],
+) -> None:
+    """The body of a worker process that serves several workers, one thread each.
+
+    Worker ``worker_ids[i]`` reads ``inboxes[i]`` and runs its jobs on ``start(worker_ids[i])``;
+    each behaves as a `serve_jobs` worker towards the parent. With more than one slot the
+    process's `render_batcher` is installed, so the slots' envs render together.
+    """
+    if len(worker_ids) != len(inboxes):
+        raise ValueError("serve_job_slots needs one inbox per worker id")
+    if len(worker_ids) == 1:
+        serve_jobs(worker_ids[0], inboxes[0], outbox, lambda: start(worker_ids[0]))
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from mikasa_envs import render_batcher
+
+    render_batcher.install_batcher()
+    threads = [
+        threading.Thread(
+            target=_serve,
+            args=(wid, inbox, outbox, lambda wid=wid: start(wid)),
+            name=f"worker-slot-{wid}",
+            daemon=True,
+        )
+        for wid, inbox in zip(worker_ids, inboxes)
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    render_batcher.uninstall_batcher()
+
+
+def _serve(worker_id: int, inbox: Any, outbox: Any, start: Callable[[], JobRunner]) -> None:
     try:
         runner = start()
     except BaseException:
