@@ -226,6 +226,7 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
     return {
         "wall_s": wall_s,
         "startup_s": getattr(executor.inner, "startup_s", None),
+        "envs_per_process": getattr(executor.inner, "envs", None),
         "executor": executor.describe(),
         "render": sorted({e["render"] for e in episodes if e["render"]}),
         "cpu_s": cpu_s if args.executor == "local" else None,
@@ -380,9 +381,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument(
         "--envs-per-worker",
         type=int,
-        default=1,
+        default=None,
         metavar="K",
-        help="envs per parallel worker process (threads sharing GPU render passes)",
+        help="envs per parallel worker process (threads sharing GPU render passes; default "
+        "4 on the GPU, 1 on the CPU)",
     )
     p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument("--address", default=None, help="Ray cluster address (--executor ray)")
@@ -428,7 +430,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f" ({args.gpu_render_workers} gpu workers)" if args.gpu_render_workers else ""
     )
     print(
-        f"parallel: {args.executor} executor, {workers} workers x {args.envs_per_worker} envs, "
+        f"parallel: {args.executor} executor, {workers} workers x {args.envs_per_worker or 'auto'} envs, "
         f"render {render_desc}; "
         f"serial: 1 process, render {args.serial_render_device}\n",
         flush=True,
@@ -468,7 +470,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         start = pr["startup_s"]
         print(
             f"  {r['steps']} steps in {pr['wall_s']:.1f} s (worker start "
-            f"{'?' if start is None else f'{start:.1f}'} s; env builds "
+            f"{'?' if start is None else f'{start:.1f}'} s; envs per process "
+            f"{sorted(set(pr['envs_per_process'] or []))}; env builds "
             f"{pr['env_build_s']:.1f} s summed over workers); render "
             f"{', '.join(pr['render'])}\n"
             f"  end to end {r['end_to_end_steps_per_s']:.1f} steps/s, steady state "

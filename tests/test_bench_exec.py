@@ -214,3 +214,19 @@ def test_video_paths_follow_the_spec():
         video_relpath("RememberColor3-VLA-v0", 7) == "videos/RememberColor3-VLA-v0/episode_0007.mp4"
     )
     assert Path(video_relpath("A", 0)).name == "episode_0000.mp4"
+
+
+def test_envs_per_process_default_follows_the_render_device(monkeypatch):
+    from mikasa_bench import executor
+
+    gpu = BenchmarkConfig(render_device="gpu")
+    cpu = BenchmarkConfig(render_device="cpu")
+    mixed = BenchmarkConfig(render_device="cpu", gpu_render_workers=1)
+    assert executor.envs_per_process(gpu, 0, None) == executor.GPU_ENVS_PER_WORKER
+    assert executor.envs_per_process(cpu, 0, None) == 1
+    assert [executor.envs_per_process(mixed, i, None) for i in (0, 1)] == [executor.GPU_ENVS_PER_WORKER, 1]
+    assert executor.envs_per_process(cpu, 0, 3) == 3  # as asked
+    monkeypatch.setattr(executor, "gpu_visible", lambda: False)
+    assert executor.envs_per_process(BenchmarkConfig(render_device="auto"), 0, None) == 1
+    with pytest.raises(BenchError, match="--envs-per-worker must be >= 1"):
+        LocalExecutor(2, 0)

@@ -80,6 +80,18 @@ def test_two_envs_per_worker_give_identical_episodes(baseline, tmp_path):
     assert {k: a[k] for k in PER_EPISODE} == {k: b[k] for k in PER_EPISODE}
 
 
+def test_env_threads_keep_global_rng_policies_reproducible(tmp_path):
+    # The reference demo policy draws from torch's global RNG: threads of one process share
+    # it, so each episode's policy calls must see the episode's own RNG states.
+    policy = ["--policy", "mikasa_bench.policies:DummyChunkPolicy", "--workers", "1"]
+    runs = {}
+    for k in ("1", "2"):
+        out = tmp_path / f"k{k}"
+        assert cli.main(["run", *COMMON, *policy, "--envs-per-worker", k, "--out", str(out)]) == 0
+        runs[k] = {key: _task_json(out)[key] for key in PER_EPISODE}
+    assert runs["1"] == runs["2"]
+
+
 def test_resume_after_interruption_loses_and_duplicates_nothing(baseline, tmp_path):
     # Pre-write an interrupted run: episode 0 journaled (with a marker wall time),
     # episode 1 torn mid-write by kill -9.

@@ -10,20 +10,6 @@ from mani_skill.agents.controllers.pd_ee_pose import PDEEPoseController
 from mikasa_envs import robot
 
 
-def test_cluster_decimate_merges_cells_and_drops_degenerate_faces():
-    # Two triangles sharing an edge, plus a sliver whose vertices fall in one cell.
-    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.001, 0.001, 0], [0.002, 0, 0]], float)
-    faces = np.array([[0, 1, 2], [1, 3, 2], [0, 4, 5]])
-    v, f, n = robot.cluster_decimate(vertices, faces, cell=0.01)
-    assert n is None
-    assert len(v) == 4 and len(f) == 2
-    triangles = {frozenset(map(tuple, np.round(v[face]).astype(int).tolist())) for face in f}
-    assert triangles == {
-        frozenset({(0, 0, 0), (1, 0, 0), (0, 1, 0)}),
-        frozenset({(1, 0, 0), (1, 1, 0), (0, 1, 0)}),
-    }
-
-
 def test_light_urdf_swaps_only_visual_meshes(tmp_path, monkeypatch):
     monkeypatch.setenv("MIKASA_CACHE_DIR", str(tmp_path))
     original = (robot.PANDA_DIR / "panda_v3.urdf").read_text()
@@ -32,7 +18,9 @@ def test_light_urdf_swaps_only_visual_meshes(tmp_path, monkeypatch):
         files = re.findall(r'filename="([^"]+)"', text)
         assert len(files) == len(re.findall(r'filename="([^"]+)"', original))
         swapped = [f for f in files if str(tmp_path) in f]
-        assert any("d415" in f for f in swapped)
+        # The housing is a box in the light description (and only where the asset is missing
+        # in the original one).
+        assert any("d415" in f for f in swapped) == (meshes == "light" or not (robot.PANDA_DIR / robot.D415_MESH).exists())
         assert all("collision" not in f for f in swapped)
         assert any("link3" in f for f in swapped) == (meshes == "light")
         # The hand and fingers fill the wrist camera's view: never decimated.
@@ -70,3 +58,13 @@ def test_unknown_robot_meshes_value_names_the_choices(monkeypatch):
     monkeypatch.setenv("MIKASA_ROBOT_MESHES", "fancy")
     with pytest.raises(ValueError, match="light, original"):
         robot.robot_meshes()
+
+
+def test_housing_box_has_the_original_outer_size():
+    import trimesh
+
+    box = trimesh.load(robot.d415_box_stl())
+    assert len(box.faces) == 12
+    original = robot.PANDA_DIR / robot.D415_MESH
+    if original.exists():  # slim installs lack it
+        np.testing.assert_allclose(box.bounds, trimesh.load(original).bounds, atol=5e-4)

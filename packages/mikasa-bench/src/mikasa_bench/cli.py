@@ -223,10 +223,10 @@ def _add_exec_args(p: argparse.ArgumentParser, default_workers: int | None) -> N
     p.add_argument(
         "--envs-per-worker",
         type=int,
-        default=1,
+        default=None,
         metavar="K",
-        help="envs each local worker process runs, one thread each (default 1); on a GPU "
-        "their cameras render in shared passes, which is what a many-worker GPU run needs",
+        help="envs each local worker process runs, one thread each; their cameras render in "
+        "shared GPU passes (default: 4 for a worker rendering on the GPU, 1 on the CPU)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -344,8 +344,8 @@ def _execute_and_report(
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
     desc = executor.describe()
     details = [f"{desc['workers']} workers"] if "workers" in desc else []
-    if desc.get("envs_per_worker", 1) > 1:
-        details.append(f"{desc['envs_per_worker']} envs each")
+    if desc.get("envs_per_worker", "auto") not in ("auto", 1):
+        details.append(f"envs per worker: {desc['envs_per_worker']}")
     if "address" in desc:
         details.append(f"Ray at {desc['address']}")
     details.append(f"render {stores[0].config.render_description()}")

@@ -1,25 +1,27 @@
 """The Panda with wrist camera, with light visual meshes and a fast CPU controller.
 
 Rendering cost is triangles: with lavapipe every vertex is CPU work, and on the GPU
-machine (H100/H200, whose graphics units are few) triangles are what limits many processes
-sharing one GPU. ManiSkill's ``panda_wristcam`` draws ~560k: a RealSense D415 housing of
-425k and Panda link meshes of 135k. By default (``MIKASA_ROBOT_MESHES=light``):
+machine (H100/H200, whose graphics units are few) triangles are part of what limits many
+processes sharing one GPU. ManiSkill's ``panda_wristcam`` draws ~560k: a RealSense D415
+housing of 425k and Panda link meshes of 135k. By default (``MIKASA_ROBOT_MESHES=light``):
 
-* the D415 housing is a clustered copy (1.2 mm cells, ~34k triangles; PSNR 61 dB against
-  frames with the original mesh);
+* the D415 housing is a box of its outer size (12 triangles; the base camera sees it a few
+  pixels large, the wrist camera not at all). Measured on lavapipe over 15 frames of random
+  motion in 3 episodes against the original mesh: base camera PSNR 43.5 dB mean (42.7 dB
+  worst), wrist camera identical, rgb steps ~1.4x faster than with a 34k-triangle
+  clustered copy (the previous default). Slim ManiSkill installs, which lack the asset,
+  render the same box, so every install draws the same pictures;
 * the arm links 0-7 are quadric-decimated to 20% of their triangles (welded first, then
-  smooth-shaded with a 15° crease angle): ~27k triangles instead of 135k. Measured on
-  lavapipe over 15 frames of random motion in 3 episodes: hand camera unchanged (the links
-  are not in its view), base camera PSNR 41.8 dB mean (35.6 dB worst frame), rgb steps
-  ~1.9x faster;
+  smooth-shaded with a 15° crease angle): ~27k triangles instead of 135k. Measured the same
+  way: hand camera unchanged (the links are not in its view), base camera PSNR 41.8 dB
+  mean (35.6 dB worst frame), rgb steps ~1.9x faster;
 * the hand and fingers keep their original meshes: they fill the wrist camera's view.
 
-``MIKASA_ROBOT_MESHES=original`` keeps ManiSkill's link meshes (only the housing is
-light), for pixel parity with renders of the original robot.
+``MIKASA_ROBOT_MESHES=original`` keeps ManiSkill's meshes, housing included (the box only
+where the asset is missing), for pixel parity with renders of the original robot.
 
 Light meshes are generated from the installed ManiSkill assets on first use and cached
-(``MIKASA_CACHE_DIR``, default ``~/.cache/mikasa-envs``). If the D415 asset is missing
-(slim ManiSkill wheels), a box of its outer size stands in.
+(``MIKASA_CACHE_DIR``, default ``~/.cache/mikasa-envs``).
 """
 
 from __future__ import annotations
@@ -46,19 +48,17 @@ if TYPE_CHECKING:  # trimesh is imported where meshes are generated, not at env 
     import trimesh
 
 D415_MESH = "realsense2_description/meshes/d415.stl"
+# Outer size of the D415 housing as ManiSkill's mesh spans it (metres), and its offset.
+D415_BOX_EXTENTS = (0.0989, 0.023, 0.02005)
+D415_BOX_CENTER = (0.0, 0.0, -0.010025)
 PANDA_DIR = Path(PACKAGE_ASSET_DIR) / "robots" / "panda"
-# Clustering cell: 1.2 mm keeps the housing's bevels.
-D415_CELL_M = 0.0012
 # Arm links: keep 20% of the triangles; normals split at creases sharper than 15°.
 # Meshes below LINK_MIN_FACES (small caps and plates) are left as they are.
 LINK_KEEP_FRACTION = 0.2
 LINK_CREASE_DEG = 15.0
 LINK_MIN_FACES = 200
 LIGHT_LINK_MESH = re.compile(r"/visual/link\d\.glb$")
-# Vertices whose normals differ by more than ~1 quantisation step are not merged, so hard
-# edges keep their shading.
-NORMAL_BUCKETS = 1.0
-CACHE_VERSION = "3"
+CACHE_VERSION = "4"
 ROBOT_MESHES_ENV_VAR = "MIKASA_ROBOT_MESHES"
 ROBOT_MESH_CHOICES = ("light", "original")
 
@@ -68,40 +68,6 @@ def cache_dir() -> Path:
     path = Path(os.environ.get("MIKASA_CACHE_DIR", Path.home() / ".cache" / "mikasa-envs"))
     path.mkdir(parents=True, exist_ok=True)
     return path
-
-
-def cluster_decimate(
-    vertices: np.ndarray, faces: np.ndarray, cell: float, normals: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Vertex-clustering decimation: merge vertices sharing a grid cell (and, if normals
-    are given, a normal bucket), drop degenerate and duplicate faces.
-
-    Returns (vertices, faces, normals) with each cluster at the mean of its members.
-    """
-    keys = np.floor(vertices / cell).astype(np.int64)
-    if normals is not None:
-        keys = np.concatenate([keys, np.round(normals * NORMAL_BUCKETS).astype(np.int64)], axis=1)
-    _, cluster, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    cluster = cluster.reshape(-1)
-
-    def mean(values: np.ndarray) -> np.ndarray:
-        sums = np.zeros((len(counts), values.shape[1]))
-        np.add.at(sums, cluster, values)
-        return sums / counts[:, None]
-
-    new_normals = None
-    if normals is not None:
-        new_normals = mean(normals)
-        new_normals /= np.linalg.norm(new_normals, axis=1, keepdims=True).clip(1e-9)
-    new_faces = cluster[faces]
-    keep = (
-        (new_faces[:, 0] != new_faces[:, 1])
-        & (new_faces[:, 1] != new_faces[:, 2])
-        & (new_faces[:, 0] != new_faces[:, 2])
-    )
-    new_faces = new_faces[keep]
-    _, first = np.unique(np.sort(new_faces, axis=1), axis=0, return_index=True)
-    return mean(vertices), new_faces[np.sort(first)], new_normals
 
 
 def _write_atomic(path: Path, data: bytes | str) -> None:
@@ -126,38 +92,32 @@ def quadric_decimate(mesh: trimesh.Trimesh, keep: float, crease_deg: float) -> t
     return trimesh.graph.smooth_shade(light, angle=np.radians(crease_deg), facet_minarea=None)
 
 
-def _light_copy(rel: str, method: str) -> Path:
-    """Light copy of the asset ``PANDA_DIR/rel`` (an STL mesh or a GLB scene), cached.
-
-    ``method``: ``"cluster"`` (vertex clustering at `D415_CELL_M`) or ``"quadric"``
-    (`quadric_decimate` at `LINK_KEEP_FRACTION`).
-    """
+def d415_box_stl() -> Path:
+    """The stand-in for the D415 housing: a box of its outer size, as STL (cached)."""
     import trimesh
 
-    source = PANDA_DIR / rel
-    tag = f"cluster{D415_CELL_M * 1000:g}mm" if method == "cluster" else f"quadric{LINK_KEEP_FRACTION:g}"
-    out = cache_dir() / f"v{CACHE_VERSION}_{tag}_{rel.replace('/', '_')}"
+    out = cache_dir() / f"v{CACHE_VERSION}_box_{D415_MESH.replace('/', '_')}"
+    if not out.exists():
+        box = trimesh.creation.box(extents=D415_BOX_EXTENTS)
+        box.apply_translation(D415_BOX_CENTER)
+        _write_atomic(out, box.export(file_type="stl"))
+    return out
+
+
+def _light_link_copy(rel: str) -> Path:
+    """Light copy of the link asset ``PANDA_DIR/rel`` (a GLB scene), cached: every mesh of
+    at least `LINK_MIN_FACES` faces `quadric_decimate`-d to `LINK_KEEP_FRACTION`."""
+    import trimesh
+
+    out = cache_dir() / f"v{CACHE_VERSION}_quadric{LINK_KEEP_FRACTION:g}_{rel.replace('/', '_')}"
     if out.exists():
         return out
-    if not source.exists() and rel == D415_MESH:
-        # Outer size of the D415 housing as the original mesh spans it (metres).
-        box = trimesh.creation.box(extents=(0.0989, 0.023, 0.02005))
-        box.apply_translation((0.0, 0.0, -0.010025))
-        _write_atomic(out, box.export(file_type="stl"))
-        return out
-    loaded = trimesh.load(source)
+    loaded = trimesh.load(PANDA_DIR / rel)
     scene = loaded if isinstance(loaded, trimesh.Scene) else trimesh.Scene(loaded)
     for name, geometry in list(scene.geometry.items()):
-        if method == "cluster":
-            vertices, faces, normals = cluster_decimate(
-                np.asarray(geometry.vertices), np.asarray(geometry.faces), D415_CELL_M,
-                np.asarray(geometry.vertex_normals),
-            )
-            light = trimesh.Trimesh(vertices, faces, vertex_normals=normals, process=False)
-        elif len(geometry.faces) >= LINK_MIN_FACES:
-            light = quadric_decimate(geometry, LINK_KEEP_FRACTION, LINK_CREASE_DEG)
-        else:
+        if len(geometry.faces) < LINK_MIN_FACES:
             continue
+        light = quadric_decimate(geometry, LINK_KEEP_FRACTION, LINK_CREASE_DEG)
         if hasattr(geometry.visual, "material"):
             light.visual = trimesh.visual.TextureVisuals(material=geometry.visual.material)
         scene.geometry[name] = light
@@ -176,8 +136,8 @@ def robot_meshes() -> str:
 
 
 def light_panda_urdf(meshes: str | None = None) -> Path:
-    """A copy of ManiSkill's ``panda_v3.urdf`` using the light housing mesh and, for
-    ``meshes="light"`` (default from ``MIKASA_ROBOT_MESHES``), light arm-link meshes.
+    """A copy of ManiSkill's ``panda_v3.urdf``; for ``meshes="light"`` (default from
+    ``MIKASA_ROBOT_MESHES``) with the box housing and light arm-link meshes.
 
     Every other mesh path is made absolute so the copy can live outside the asset folder.
     """
@@ -193,10 +153,10 @@ def light_panda_urdf(meshes: str | None = None) -> Path:
 
     def absolute(match: re.Match) -> str:
         rel = match.group(1)
-        if rel == D415_MESH:
-            target = _light_copy(rel, "cluster")
+        if rel == D415_MESH and (meshes == "light" or not (PANDA_DIR / rel).exists()):
+            target = d415_box_stl()
         elif meshes == "light" and LIGHT_LINK_MESH.search(rel):
-            target = _light_copy(rel, "quadric")
+            target = _light_link_copy(rel)
         else:
             target = PANDA_DIR / rel
         return f'filename="{target}"'
