@@ -123,14 +123,20 @@ def _episode_record(env_id: str, i: int, r: Any, wall_s: float, **extra: Any) ->
     }
 
 
-def run_serial(spec: dict[str, Any]) -> dict[str, Any]:
-    """Run `serial_child` in a fresh interpreter (no state shared with the parent)."""
+REFERENCE_RENDERING = {"MIKASA_CAMERA_GROUP": "0", "MIKASA_ROBOT_MESHES": "original"}
+"""The reference runner's rendering: ManiSkill's per-camera path and its robot meshes."""
+
+
+def run_serial(spec: dict[str, Any], env: dict[str, str] | None = None) -> dict[str, Any]:
+    """Run `serial_child` in a fresh interpreter (no state shared with the parent), with
+    ``env`` added to its environment."""
     t0 = time.perf_counter()
     cpu0 = _cpu_s(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(
         [sys.executable, __file__, "--_serial-child", json.dumps(spec)],
         capture_output=True,
         text=True,
+        env={**os.environ, **(env or {})},
     )
     cpu_s = _cpu_s(resource.RUSAGE_CHILDREN) - cpu0
     if proc.returncode != 0:
@@ -390,6 +396,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--address", default=None, help="Ray cluster address (--executor ray)")
     p.add_argument("--skip-serial", action="store_true", help="only the parallel runner")
     p.add_argument(
+        "--serial-episodes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="episodes per task of the serial loop (default: as the parallel runner's)",
+    )
+    p.add_argument(
+        "--reference-serial",
+        action="store_true",
+        help="also time the serial loop with the reference runner's rendering (ManiSkill's "
+        "per-camera path, original robot meshes) and report the speed-up over it too",
+    )
+    p.add_argument(
         "--repeats",
         type=int,
         default=1,
@@ -439,12 +458,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Serial and parallel alternate, `--repeats` times; each mode's best (least disturbed)
     # round is compared, as the machine may be shared.
     serial_rounds: list[dict[str, Any]] = []
+    reference_rounds: list[dict[str, Any]] = []
     par_rounds: list[dict[str, Any]] = []
     for rnd in range(1, args.repeats + 1):
         tag = f" (round {rnd}/{args.repeats})" if args.repeats > 1 else ""
-        if not args.skip_serial:
-            print(f"serial loop{tag} ...", flush=True)
-            sr = run_serial(spec)
+        serial_modes = [] if args.skip_serial else [("serial loop", None)]
+        if args.reference_serial:
+            serial_modes.append(("serial loop, reference rendering", REFERENCE_RENDERING))
+        for label, env in serial_modes:
+            print(f"{label}{tag} ...", flush=True)
+            sr = run_serial({**spec, "episodes": args.serial_episodes or episodes}, env)
+            sr["reference_rendering"] = env is not None
             sr["load_average"] = _load()
             # End to end includes the imports, as the parallel wall time includes the
             # workers' start; steady state is the loop without env builds.
@@ -460,7 +484,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{r['cpu_ms_per_step']:.0f} CPU-ms per step",
                 flush=True,
             )
-            serial_rounds.append(sr)
+            (reference_rounds if env else serial_rounds).append(sr)
         print(f"parallel runner, {workers} workers{tag} ...", flush=True)
         pr = run_parallel(spec, args)
         pr["load_average"] = _load()
@@ -490,7 +514,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def best(rounds: list[dict[str, Any]]) -> dict[str, Any] | None:
         return max(rounds, key=lambda x: x["rates"]["steady_steps_per_s"]) if rounds else None
 
-    serial, par = best(serial_rounds), best(par_rounds)
+    serial, par, reference = best(serial_rounds), best(par_rounds), best(reference_rounds)
     assert par is not None
     setup = par["env_build_s"]
     startup = par["startup_s"]
@@ -506,7 +530,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "parallel_render_device": render_desc,
         "serial": serial,
         "parallel": par,
-        "rounds": {"serial": serial_rounds, "parallel": par_rounds},
+        "serial_reference_rendering": reference,
+        "rounds": {"serial": serial_rounds, "serial_reference": reference_rounds, "parallel": par_rounds},
     }
     print()
     if serial is not None:
@@ -514,9 +539,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         fields = ("seed", "success_once", "episode_return", "n_steps")
         runs = [
             {key(e): [e[f] for f in fields] for e in r["episodes"]}
-            for r in serial_rounds + par_rounds
+            for r in serial_rounds + reference_rounds + par_rounds
         ]
-        identical = all(x == runs[0] for x in runs)
+        common = set.intersection(*(set(x) for x in runs))  # --serial-episodes may run fewer
+        identical = all({k: x[k] for k in common} == {k: runs[0][k] for k in common} for x in runs)
         ratio_e2e = (
             par["rates"]["end_to_end_steps_per_s"] / serial["rates"]["end_to_end_steps_per_s"]
         )
@@ -541,6 +567,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             line += f"  (target >= {target}x with {workers} workers: "
             line += "met)" if ratio_steady >= target else "NOT met)"
         print(line)
+        if reference is not None:
+            ratio_ref = par["rates"]["steady_steps_per_s"] / reference["rates"]["steady_steps_per_s"]
+            out["comparison"]["speedup_over_reference_rendering"] = ratio_ref
+            print(
+                f"speed-up over the serial loop with the reference runner's rendering "
+                f"({reference['rates']['steady_steps_per_s']:.1f} steps/s): {ratio_ref:.2f}x"
+            )
     steady = par["rates"]["steady_steps_per_s"]
     per_task_builds = setup / max(1, len(args.tasks))  # all workers' builds of one task
     projected = (startup or 0.0) + n_full_steps / steady + n_full_tasks * per_task_builds / workers

@@ -104,9 +104,15 @@ def compare_threads(env_ids: list[str], threads: int = 4) -> int:
     for k, env_id in enumerate(ids):
         if len(batched[k]) != len(reference[k]):
             raise SystemExit(f"thread {k} ({env_id}) did not finish its episode")
-        diffs = [int(np.abs(a.astype(np.int16) - b).max()) for a, b in zip(reference[k], batched[k])]
+        deltas = [np.abs(a.astype(np.int16) - b) for a, b in zip(reference[k], batched[k])]
+        diffs = [int(d.max()) for d in deltas]
+        over = sum(int((d > TOLERANCE).sum()) for d in deltas)
         worst = max(worst, *diffs)
-        print(f"thread {k} {env_id}: largest pixel difference per step {diffs}", flush=True)
+        print(
+            f"thread {k} {env_id}: largest pixel difference per step {diffs}; values "
+            f"differing by more than {TOLERANCE}: {over} of {sum(d.size for d in deltas)}",
+            flush=True,
+        )
     print(f"{threads} threads: {pictures} pictures in {passes} shared passes", flush=True)
     return worst
 
