@@ -75,7 +75,7 @@ def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
     logging.getLogger("mani_skill ").setLevel(logging.ERROR)  # ManiSkill's logger name
     from mikasa_bench.episode import make_benchmark_env, run_episode
     from mikasa_bench.policies import ZeroPolicy
-    from mikasa_bench.protocol import BenchmarkConfig
+    from mikasa_bench.protocol import BenchmarkConfig, starts_scene
     from mikasa_bench.render import check_render_device
 
     import_s = time.perf_counter() - t_start
@@ -96,7 +96,7 @@ def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
         try:
             for i, seed in enumerate(config.episode_seeds()):
                 te, ce = time.perf_counter(), time.process_time()
-                r, _ = run_episode(env, policy, seed)
+                r, _ = run_episode(env, policy, seed, fresh_scene=starts_scene(i))
                 wall, cpu = time.perf_counter() - te, time.process_time() - ce
                 episodes.append(_episode_record(env_id, i, r, wall, cpu_s=cpu))
         finally:

@@ -462,7 +462,7 @@ def test_jobs_are_task_major_and_seeded(tmp_path):
     ]
     sched = _Scheduler(jobs)
     first = sched.next_for(None)
-    assert sched.next_for(first.env_key).episode == 1  # stays on the env it has
+    assert sched.next_for(first).episode == 1  # stays on the env (and scene) it has
 
 
 def test_scheduler_spreads_new_workers_over_tasks(tmp_path):
@@ -470,11 +470,42 @@ def test_scheduler_spreads_new_workers_over_tasks(tmp_path):
     sched = _Scheduler(jobs)
     a, b = sched.next_for(None), sched.next_for(None)
     assert a.task.env_id != b.task.env_id  # two workers, two envs: not both on task 1
-    rest = [sched.next_for(a.env_key) for _ in range(2)] + [sched.next_for(b.env_key) for _ in range(2)]
-    assert all(j is not None for j in rest) and sched.next_for(a.env_key) is None
+    rest = [sched.next_for(a)]
+    rest.append(sched.next_for(rest[-1]))
+    rest.append(sched.next_for(b))
+    rest.append(sched.next_for(rest[-1]))
+    assert all(j is not None for j in rest) and sched.next_for(rest[1]) is None
     assert sorted((j.task.env_id, j.episode) for j in [a, b, *rest]) == sorted(
         (j.task.env_id, j.episode) for j in jobs
     )
+
+
+def test_scheduler_keeps_each_scene_on_one_worker_in_order(tmp_path):
+    jobs = _jobs_for([_store(tmp_path, n=12)])  # 2 tasks x 12 episodes: 3 scenes each
+    sched = _Scheduler(jobs)
+    workers: dict[int, list] = {w: [] for w in range(5)}
+    last = dict.fromkeys(workers)
+    while True:
+        progressed = False
+        for w in workers:
+            job = sched.next_for(last[w])
+            if job is not None:
+                workers[w].append(job)
+                last[w] = job
+                progressed = True
+        if not progressed:
+            break
+    played = [(j.task.env_id, j.episode) for js in workers.values() for j in js]
+    assert sorted(played) == sorted((j.task.env_id, j.episode) for j in jobs)
+    for js in workers.values():
+        # Every scene a worker starts, it plays whole and in order before anything else.
+        runs = [js[0:1]]
+        for j in js[1:]:
+            (runs[-1].append(j) if j.scene_key == runs[-1][-1].scene_key else runs.append([j]))
+        for run in runs:
+            first = run[0].episode
+            assert first % 5 == 0 and [j.episode for j in run] == list(range(first, first + len(run)))
+        assert len({tuple(r[0].scene_key) for r in runs}) == len(runs)
 
 
 def test_resume_from_journal_neither_loses_nor_duplicates(tmp_path):

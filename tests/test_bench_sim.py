@@ -92,6 +92,29 @@ def test_env_threads_keep_global_rng_policies_reproducible(tmp_path):
     assert runs["1"] == runs["2"]
 
 
+def test_an_episode_does_not_depend_on_what_its_worker_played_before():
+    # PhysX keeps contact caches across resets; the protocol fixes each episode's history
+    # (a fresh scene every 5 episodes, in order), and a worker replays what it lacks.
+    from mikasa_bench.executor import EpisodeJob, _EpisodeWorker
+
+    config = BenchmarkConfig(n_episodes=7, obs_mode="state", sim_backend="cpu")
+    task = resolve_tasks(env_ids=["RememberShapeAndColor5x3-VLA-v0"]).tasks[0]
+    policy = resolve_policy("oracle")
+    jobs = [EpisodeJob(0, task, i, seed, config, policy) for i, seed in enumerate(config.episode_seeds())]
+
+    def play(order):
+        worker = _EpisodeWorker(0)
+        try:
+            return {i: worker.run(jobs[i]).result for i in order}
+        finally:
+            worker.close()
+
+    in_order = play(range(7))
+    shuffled = play([6, 2, 5, 0, 1, 3, 4])
+    assert shuffled == in_order
+    assert all(r.success_once for r in in_order.values())
+
+
 def test_resume_after_interruption_loses_and_duplicates_nothing(baseline, tmp_path):
     # Pre-write an interrupted run: episode 0 journaled (with a marker wall time),
     # episode 1 torn mid-write by kill -9.

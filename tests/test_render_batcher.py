@@ -25,23 +25,29 @@ class FakeGroup:
     """Renders each scene as a 1x1 picture holding its current value."""
 
     built: list[int] = []
+    first: list[list[bool]] = []
 
-    def __init__(self, views, device) -> None:
+    def __init__(self, views, device, first_group) -> None:
         self.scenes = [scene for scene, _ in views]
         FakeGroup.built.append(len(views))
+        FakeGroup.first.append(list(first_group))
 
-    def render_all(self):
-        return [{"cam": torch.full((1, 1, 1, 3), s.value % 256, dtype=torch.uint8)} for s in self.scenes]
+    def render_all(self, refresh):
+        # Scenes not in ``refresh`` must not be read (their threads may be stepping them).
+        return [
+            {"cam": torch.full((1, 1, 1, 3), s.value % 256 if i in refresh else 255, dtype=torch.uint8)}
+            for i, s in enumerate(self.scenes)
+        ]
 
 
 class FailingGroup(FakeGroup):
-    def render_all(self):
+    def render_all(self, refresh):
         raise ValueError("boom")
 
 
 @pytest.fixture
 def batcher():
-    FakeGroup.built = []
+    FakeGroup.built, FakeGroup.first = [], []
     b = RenderBatcher(group_factory=FakeGroup)
     yield b
     b.close()
@@ -103,8 +109,13 @@ def test_forgotten_scenes_leave_the_group(batcher):
     batcher.render(b, (FakeScene(2), {"cam": None}), "cpu")
     assert FakeGroup.built == [1, 2]  # rebuilt when b's scene arrived
     batcher.forget(a)
-    batcher.render(b, (FakeScene(2), {"cam": None}), "cpu")
+    scene_b = FakeScene(2)
+    batcher.render(b, (scene_b, {"cam": None}), "cpu")
+    batcher.render(b, (scene_b, {"cam": None}), "cpu")
     assert FakeGroup.built == [1, 2, 1]
+    # Only scenes new to every group get their first render update (a scene mid-episode
+    # must not be updated again).
+    assert FakeGroup.first == [[True], [False, True], [True]]
 
 
 def test_render_errors_reach_the_waiting_thread():

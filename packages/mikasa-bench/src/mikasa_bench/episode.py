@@ -176,6 +176,7 @@ def run_episode(
     collect_video: bool = False,
     frame_sink: Callable[[np.ndarray], None] | None = None,
     own_global_rngs: bool = False,
+    fresh_scene: bool = False,
 ) -> tuple[EpisodeResult, list[np.ndarray] | None]:
     """Run one episode of ``env`` (already wrapped, ``num_envs=1``) with ``policy``.
 
@@ -193,6 +194,8 @@ def run_episode(
 
     ``own_global_rngs`` (for episodes run in threads of one process): the policy's calls
     see the episode's own global RNG states (`EpisodeRngs`) instead of the process's.
+    ``fresh_scene``: the reset rebuilds the scene (``reconfigure``), as every
+    `EPISODES_PER_SCENE`-th episode does (`starts_scene`).
     """
     import torch
 
@@ -202,7 +205,8 @@ def run_episode(
     else:
         seed_global_rngs(episode_seed)
         policy_rngs = contextlib.nullcontext
-    obs, _ = env.reset(seed=int(episode_seed))
+    options = {"reconfigure": True} if fresh_scene else None
+    obs, _ = env.reset(seed=int(episode_seed), options=options)
     max_steps = getattr(env, "max_episode_steps", None)
     if max_steps is None:
         raise RuntimeError(

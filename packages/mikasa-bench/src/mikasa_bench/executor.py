@@ -41,7 +41,7 @@ from typing import Any
 from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import BenchError
 from .policies import PolicySpec, build_policy, policy_chunk_size
-from .protocol import BenchmarkConfig
+from .protocol import EPISODES_PER_SCENE, BenchmarkConfig, starts_scene
 from .render import apply_environment, check_render_device, worker_environment
 from .tasks import BenchmarkTask
 
@@ -74,6 +74,15 @@ class EpisodeJob:
     def env_key(self) -> Hashable:
         """Jobs with equal keys can share one env instance."""
         return (self.task.env_id, self.config)
+
+    @property
+    def scene_key(self) -> Hashable:
+        """Jobs with equal keys play on one scene, in episode order (`EPISODES_PER_SCENE`)."""
+        return (self.run_index, self.env_key, self.episode // EPISODES_PER_SCENE)
+
+    def seed_of(self, episode: int) -> int:
+        """The seed of episode ``episode`` of this job's task."""
+        return self.seed - self.episode + episode
 
 
 @dataclass
@@ -124,6 +133,8 @@ class _EpisodeWorker:
         self.env_key: Hashable | None = None
         self.policies: dict[str, Any] = {}
         self.render: str | None = None
+        self.last_played: tuple[Hashable, int] | None = None
+        """(scene key, episode) of the last episode played on the env's current scene."""
 
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
@@ -144,13 +155,10 @@ class _EpisodeWorker:
     def run(self, job: EpisodeJob) -> EpisodeOutcome:
         """Run one job; exceptions become an outcome with ``error`` set."""
         t0 = time.perf_counter()
-        # The episode (not the env build) takes part in shared render passes when this
-        # process runs several workers (mikasa_envs.render_batcher); else a no-op.
-        from mikasa_envs.render_batcher import participating
-
         try:
             env = self._env_for(job)
             policy = self._policy_for(job, env)
+            self._replay_scene_history(job, env, policy)
             setup_s = time.perf_counter() - t0
             cpu0 = time.process_time()
             chunk = policy_chunk_size(policy)
@@ -159,14 +167,10 @@ class _EpisodeWorker:
                 from .video import EpisodeVideo
 
                 with EpisodeVideo() as recorder:
-                    with participating():
-                        result, _ = run_episode(
-                            env, policy, job.seed, frame_sink=recorder.add, own_global_rngs=self.threaded
-                        )
+                    result = self._play(job, job.episode, env, policy, frame_sink=recorder.add)
                     video = recorder.finish()
             else:
-                with participating():
-                    result, _ = run_episode(env, policy, job.seed, own_global_rngs=self.threaded)
+                result = self._play(job, job.episode, env, policy)
             return EpisodeOutcome(
                 job,
                 result,
@@ -192,6 +196,36 @@ class _EpisodeWorker:
                 user_error=isinstance(exc, BenchError),
             )
 
+    def _play(self, job: EpisodeJob, episode: int, env: Any, policy: Any, **kwargs: Any) -> EpisodeResult:
+        """Play episode ``episode`` of ``job``'s task (a fresh scene where `starts_scene`)."""
+        from mikasa_envs.render_batcher import participating
+
+        self.last_played = None  # until it has finished
+        # The episode (not the env build) takes part in shared render passes when this
+        # process runs several workers (mikasa_envs.render_batcher); else a no-op.
+        with participating():
+            result, _ = run_episode(
+                env,
+                policy,
+                job.seed_of(episode),
+                own_global_rngs=self.threaded,
+                fresh_scene=starts_scene(episode),
+                **kwargs,
+            )
+        self.last_played = (job.scene_key, episode)
+        return result
+
+    def _replay_scene_history(self, job: EpisodeJob, env: Any, policy: Any) -> None:
+        """Play (and discard) the episodes that precede ``job`` on its scene, unless the
+        env's scene just played them: the job's numbers then do not depend on which
+        episodes this worker ran before (the scheduler hands out a scene's episodes in
+        order to one worker, so this only replays after a resume or an error)."""
+        first = job.episode - job.episode % EPISODES_PER_SCENE
+        if job.episode == first or self.last_played == (job.scene_key, job.episode - 1):
+            return
+        for episode in range(first, job.episode):
+            self._play(job, episode, env, policy)
+
     def close(self) -> None:
         """Close the cached env and forget its policies."""
         if self.env is not None:
@@ -199,7 +233,7 @@ class _EpisodeWorker:
                 self.env.close()
             except Exception:
                 pass
-        self.env, self.env_key, self.policies = None, None, {}
+        self.env, self.env_key, self.policies, self.last_played = None, None, {}, None
 
 
 def available_cores() -> int:
@@ -308,36 +342,52 @@ def _worker_main(
 
 
 class _Scheduler:
-    """Hands out jobs task by task: a worker keeps the env it has while that task has
-    jobs left; a worker that needs a new env joins the task with the fewest workers on it
-    (then the one with the most jobs left). Workers thus spread over tasks instead of all
-    building every task's env in turn: measured on the GPU machine, an env build costs
-    2-5 s while 16 workers build at once, as much as ~40 short episodes. Which worker runs
-    an episode never changes its result."""
+    """Hands out jobs scene by scene and task by task.
+
+    A worker gets the episodes of one scene (`EpisodeJob.scene_key`: 5 consecutive
+    episodes of a task) in order and alone, so they play on one scene as the protocol
+    fixes; then the next unclaimed scene of the same task, keeping its env. A worker that
+    needs a new env joins the task with the fewest workers on it (then the one with the
+    most jobs left), so workers spread over tasks instead of all building every task's env
+    in turn: measured on the GPU machine, an env build costs 2-5 s while 16 workers build
+    at once, as much as ~40 short episodes. Which worker runs an episode never changes its
+    result (the workers replay a scene's earlier episodes if they must)."""
 
     def __init__(self, jobs: Sequence[EpisodeJob]) -> None:
-        self.groups: OrderedDict[Hashable, deque[EpisodeJob]] = OrderedDict()
+        self.unclaimed: OrderedDict[Hashable, OrderedDict[Hashable, deque[EpisodeJob]]] = OrderedDict()
+        """Env key -> scene key -> the scene's jobs, for scenes no worker has started."""
         for job in jobs:
-            self.groups.setdefault(job.env_key, deque()).append(job)
+            scenes = self.unclaimed.setdefault(job.env_key, OrderedDict())
+            scenes.setdefault(job.scene_key, deque()).append(job)
+        self.claimed: dict[Hashable, deque[EpisodeJob]] = {}
+        """Scene key -> jobs left of a scene a worker is playing."""
         self.holders: dict[Hashable, int] = {}
         """Env key -> workers whose last job was of that key."""
 
-    def next_for(self, last_key: Hashable | None) -> EpisodeJob | None:
-        """The next job for a worker whose last job had env key ``last_key``."""
-        group = self.groups.get(last_key) if last_key is not None else None
-        if not group:
-            if not self.groups:
-                return None
-            # A new env: the least-served task (order of the run as the last tie-break).
-            order = {key: i for i, key in enumerate(self.groups)}
-            key = min(self.groups, key=lambda k: (self.holders.get(k, 0), -len(self.groups[k]), order[k]))
-            group = self.groups[key]
-            if last_key is not None and self.holders.get(last_key):
-                self.holders[last_key] -= 1
-            self.holders[key] = self.holders.get(key, 0) + 1
-        job = group.popleft()
-        if not group:
-            del self.groups[job.env_key]
+    def next_for(self, last: EpisodeJob | None) -> EpisodeJob | None:
+        """The next job for a worker whose last job was ``last`` (None: a new worker)."""
+        scene = self.claimed.get(last.scene_key) if last is not None else None
+        if not scene:
+            key = last.env_key if last is not None else None
+            if key not in self.unclaimed:
+                if not self.unclaimed:
+                    return None
+                # A new env: the least-served task (order of the run as the last tie-break).
+                order = {k: i for i, k in enumerate(self.unclaimed)}
+                jobs_left = {k: sum(len(q) for q in v.values()) for k, v in self.unclaimed.items()}
+                new = min(self.unclaimed, key=lambda k: (self.holders.get(k, 0), -jobs_left[k], order[k]))
+                if key is not None and self.holders.get(key):
+                    self.holders[key] -= 1
+                self.holders[new] = self.holders.get(new, 0) + 1
+                key = new
+            scenes = self.unclaimed[key]
+            scene_key, scene = scenes.popitem(last=False)
+            if not scenes:
+                del self.unclaimed[key]
+            self.claimed[scene_key] = scene
+        job = scene.popleft()
+        if not scene:
+            del self.claimed[job.scene_key]
         return job
 
 
@@ -346,7 +396,7 @@ class _Handle:
     process: Any
     inbox: Any
     job: EpisodeJob | None = None
-    last_key: Hashable | None = None
+    last: EpisodeJob | None = None
 
 
 GPU_ENVS_PER_WORKER = 4
@@ -447,7 +497,7 @@ class LocalExecutor(Executor):
                         self.startup_s = time.perf_counter() - t_start
                     continue
                 h = handles[wid]
-                h.job, h.last_key = None, payload.job.env_key
+                h.job, h.last = None, payload.job
                 remaining -= 1
                 self._assign(h, scheduler)
                 yield payload
@@ -457,7 +507,7 @@ class LocalExecutor(Executor):
 
     @staticmethod
     def _assign(h: _Handle, scheduler: _Scheduler) -> None:
-        job = scheduler.next_for(h.last_key)
+        job = scheduler.next_for(h.last)
         if job is not None:
             h.job = job
             h.inbox.put(job)

@@ -204,10 +204,10 @@ class RayExecutor(Executor):
     ) -> Iterator[EpisodeOutcome]:
         scheduler = _Scheduler(jobs)
         in_flight: dict[Any, tuple[int, EpisodeJob]] = {}
-        last_key: list[Any] = [None] * len(actors)
+        last: list[EpisodeJob | None] = [None] * len(actors)
 
         def assign(wid: int) -> None:
-            job = scheduler.next_for(last_key[wid])
+            job = scheduler.next_for(last[wid])
             if job is not None:
                 in_flight[actors[wid].run.remote(job)] = (wid, job)
 
@@ -226,7 +226,7 @@ class RayExecutor(Executor):
                         f"{job.episode} (seed {job.seed}): {type(exc).__name__}: {exc}; "
                         f"finished episodes are saved — rerun with --resume to continue"
                     ) from None
-                last_key[wid] = job.env_key
+                last[wid] = job
                 remaining -= 1
                 assign(wid)
                 yield outcome

@@ -21,7 +21,7 @@ from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import EpisodeFailedError
 from .executor import EpisodeJob, Executor
 from .policies import policy_chunk_size
-from .protocol import BenchmarkConfig, package_versions, protocol_settings
+from .protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
 from .results import (
     RunStore,
     _atomic_write_bytes,
@@ -164,11 +164,13 @@ def evaluate_task(
                 from .video import EpisodeVideo
 
                 with EpisodeVideo() as recorder:
-                    result, _ = run_episode(env, policy, seed, frame_sink=recorder.add)
+                    result, _ = run_episode(
+                        env, policy, seed, frame_sink=recorder.add, fresh_scene=starts_scene(i)
+                    )
                     data = recorder.finish()
                 _atomic_write_bytes(Path(video_dir) / f"episode_{i:04d}.mp4", data)
             else:
-                result, _ = run_episode(env, policy, seed)
+                result, _ = run_episode(env, policy, seed, fresh_scene=starts_scene(i))
             episodes.append(result)
             if episode_callback is not None:
                 episode_callback(i, result)

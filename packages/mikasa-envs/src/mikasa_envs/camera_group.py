@@ -106,7 +106,16 @@ class CameraGroupRenderer:
     """Renders named cameras of one or more SAPIEN scenes together on the GPU, in one pass;
     returns uint8 RGB on the CPU."""
 
-    def __init__(self, views: Sequence[SceneCameras], device: torch.device | str = "cuda"):
+    def __init__(
+        self,
+        views: Sequence[SceneCameras],
+        device: torch.device | str = "cuda",
+        first_group: Sequence[bool] | None = None,
+    ):
+        """``first_group[i]``: scene ``i`` has not been in a camera group before (default:
+        all); only such a scene gets its render system's first update. Updating again a
+        scene that is mid-episode would change its simulation in the last bits: the update
+        reads the articulation's link poses, which PhysX recomputes from joint positions."""
         if not views:
             raise ValueError("a camera group needs at least one scene")
         self.scenes = [scene for scene, _ in views]
@@ -120,12 +129,14 @@ class CameraGroupRenderer:
         # Each scene's rows of the shared pose buffer: (first row, entity index per row).
         self._rows: list[tuple[int, np.ndarray]] = []
         n_rows = 0
-        for scene, cameras in views:
+        first_group = [True] * len(views) if first_group is None else list(first_group)
+        for (scene, cameras), first in zip(views, first_group, strict=True):
             rows = assign_pose_rows(scene, list(cameras.values()), first_row=n_rows)
             self._rows.append((n_rows, rows))
             n_rows += len(rows)
-            check_pose_layout(scene)
-            scene.update_render()  # the render system's own first update, before the group exists
+            if first:
+                check_pose_layout(scene)
+                scene.update_render()  # the render system's own first update, before any group
 
         self._stream = torch.cuda.current_stream(device)
         self._host_poses = torch.zeros((n_rows, _POSE_ROW_WIDTH), dtype=torch.float32).pin_memory()
@@ -143,10 +154,17 @@ class CameraGroupRenderer:
         """The first (for a single-scene group: the) scene."""
         return self.scenes[0]
 
-    def render_all(self) -> list[dict[str, torch.Tensor]]:
-        """Render every camera at its scene's current poses: per scene, name -> uint8
-        [1, H, W, 3] on the CPU, with the rest of a CPU-simulated env's observation."""
-        for scene, (first, rows) in zip(self.scenes, self._rows):
+    def render_all(self, refresh: Sequence[int] | None = None) -> list[dict[str, torch.Tensor]]:
+        """Render every camera: per scene, name -> uint8 [1, H, W, 3] on the CPU, with the
+        rest of a CPU-simulated env's observation.
+
+        The poses of the scenes listed in ``refresh`` (default: all) are read now; the
+        others are drawn at the poses they had when last read, and their pictures are
+        not meant to be used. (A scene that another thread may be stepping must not be
+        read: see render_batcher.py.)"""
+        indices = range(len(self.scenes)) if refresh is None else refresh
+        for i in indices:
+            scene, (first, rows) = self.scenes[i], self._rows[i]
             packed = packed_poses(scene)[rows]
             self._host_np[first : first + len(rows), 0:3] = packed[:, 4:7]
             self._host_np[first : first + len(rows), 3:7] = packed[:, 0:4]

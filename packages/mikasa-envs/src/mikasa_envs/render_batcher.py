@@ -88,6 +88,7 @@ class RenderBatcher:
         self._views: dict[int, _Request] = {}  # id(owner) -> its latest request (scene, device)
         self._group: Any = None
         self._order: list[int] = []  # id(owner) of the group's scenes, in group order
+        self._grouped: set[int] = set()  # id(owner) whose current scene was in a group
         self._rendering = False
         self._closed = False
         self._local = threading.local()
@@ -139,6 +140,7 @@ class RenderBatcher:
             self._cond.wait_for(lambda: not self._rendering)
             if self._views.pop(id(owner), None) is not None:
                 self._group = None
+            self._grouped.discard(id(owner))
 
     def close(self) -> None:
         """Stop the batcher's thread; later renders raise."""
@@ -186,12 +188,20 @@ class RenderBatcher:
             known = self._views.get(key)
             if known is None or known.view[0] is not request.view[0]:
                 self._group = None
+                self._grouped.discard(key)
             self._views[key] = request
         if self._group is None:
             self._order = list(self._views)
             known = [self._views[key] for key in self._order]
-            self._group = self._group_factory([r.view for r in known], known[0].device)
-        pictures = self._group.render_all()
+            first = [key not in self._grouped for key in self._order]
+            self._group = self._group_factory([r.view for r in known], known[0].device, first)
+            self._grouped.update(self._order)
+        # Only the waiting threads' scenes are read: another thread may be stepping its
+        # scene right now (SAPIEN releases the GIL while PhysX steps), and reading poses
+        # during a step changed later results in the last bits (seen on the GPU machine).
+        waiting = {id(r.owner) for r in batch}
+        refresh = [i for i, key in enumerate(self._order) if key in waiting]
+        pictures = self._group.render_all(refresh)
         return dict(zip(self._order, pictures))
 
 
