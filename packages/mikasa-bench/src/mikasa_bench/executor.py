@@ -348,8 +348,8 @@ class _Scheduler:
     episodes of a task) in order and alone, so they play on one scene as the protocol
     fixes; then the next unclaimed scene of the same task, keeping its env. A worker that
     needs a new env joins the task with the fewest workers on it (then the one with the
-    most jobs left), so workers spread over tasks instead of all building every task's env
-    in turn: measured on the GPU machine, an env build costs 2-5 s while 16 workers build
+    most env steps left, so long-horizon tasks start early and do not trail the run), so
+    workers spread over tasks instead of all building every task's env in turn: measured on the GPU machine, an env build costs 2-5 s while 16 workers build
     at once, as much as ~40 short episodes. Which worker runs an episode never changes its
     result (the workers replay a scene's earlier episodes if they must)."""
 
@@ -374,8 +374,11 @@ class _Scheduler:
                     return None
                 # A new env: the least-served task (order of the run as the last tie-break).
                 order = {k: i for i, k in enumerate(self.unclaimed)}
-                jobs_left = {k: sum(len(q) for q in v.values()) for k, v in self.unclaimed.items()}
-                new = min(self.unclaimed, key=lambda k: (self.holders.get(k, 0), -jobs_left[k], order[k]))
+                steps_left = {
+                    k: sum(j.task.max_episode_steps for q in v.values() for j in q)
+                    for k, v in self.unclaimed.items()
+                }
+                new = min(self.unclaimed, key=lambda k: (self.holders.get(k, 0), -steps_left[k], order[k]))
                 if key is not None and self.holders.get(key):
                     self.holders[key] -= 1
                 self.holders[new] = self.holders.get(new, 0) + 1
