@@ -22,7 +22,6 @@ from mani_skill.utils.scene_builder.table import TableSceneBuilder
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs import render_batcher
 from mikasa_envs.camera_group import CameraGroupRenderer, env_cameras, env_render_device
-from mikasa_envs.fp_environment import use_default_fp_environment
 from mikasa_envs.robot import LightPandaWristCam
 
 ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
@@ -234,17 +233,13 @@ class MikasaVLABaseEnv(BaseEnv):
     # ------------------------------------------------------------- stepping
     def reset(self, seed: Any = None, options: dict | None = None):
         """ManiSkill's reset, one thread at a time: it reseeds and draws from torch's
-        global RNG (render_batcher.global_rng_section); in the default floating-point
-        environment (fp_environment.py)."""
+        global RNG (render_batcher.global_rng_section)."""
         with render_batcher.global_rng_section():
-            use_default_fp_environment()
             return super().reset(seed=seed, options=options)
 
     def step(self, action: Any):
-        """ManiSkill's step with input checks, in the default floating-point environment;
-        episodes end only by truncation."""
+        """ManiSkill's step with input checks; episodes end only by truncation."""
         self._check_action(action)
-        use_default_fp_environment()
         obs, reward, _, truncated, info = super().step(action)
         # Upstream returns terminated & ~success: success never ends an episode, and no
         # selection task defines a failure, so only a family's "fail" can terminate.

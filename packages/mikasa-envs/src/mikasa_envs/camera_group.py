@@ -113,9 +113,8 @@ class CameraGroupRenderer:
         first_group: Sequence[bool] | None = None,
     ):
         """``first_group[i]``: scene ``i`` has not been in a camera group before (default:
-        all); only such a scene gets its render system's first update. Updating again a
-        scene that is mid-episode would change its simulation in the last bits: the update
-        reads the articulation's link poses, which PhysX recomputes from joint positions."""
+        all); only such a scene gets its render system's first update (and a check of the
+        pose layout). A scene already in a group may be mid-episode in another thread."""
         if not views:
             raise ValueError("a camera group needs at least one scene")
         self.scenes = [scene for scene, _ in views]

@@ -197,8 +197,7 @@ class RenderBatcher:
             self._group = self._group_factory([r.view for r in known], known[0].device, first)
             self._grouped.update(self._order)
         # Only the waiting threads' scenes are read: another thread may be stepping its
-        # scene right now (SAPIEN releases the GIL while PhysX steps), and reading poses
-        # during a step changed later results in the last bits (seen on the GPU machine).
+        # scene right now, and its pictures are not wanted in this pass anyway.
         waiting = {id(r.owner) for r in batch}
         refresh = [i for i, key in enumerate(self._order) if key in waiting]
         pictures = self._group.render_all(refresh)
