@@ -24,9 +24,12 @@ per-episode results of all runs are identical (they must be: zero policy, same s
     python benchmarks/bench_throughput.py --repeats 3            # shared machine: best of 3
     python benchmarks/bench_throughput.py --obs-mode state --tasks RememberColor3-VLA-v0
 
-On a 16-core GPU machine (lavapipe needed for CPU rendering: mesa-vulkan-drivers):
+On a 16-core GPU machine (4 envs per GPU-rendering worker by default, ``--envs-per-worker``;
+``--reference-serial`` also times the serial loop with ManiSkill's own rendering; lavapipe
+needed for CPU rendering: mesa-vulkan-drivers):
 
-    python benchmarks/bench_throughput.py --workers 16 --json gpu16_auto.json
+    python benchmarks/bench_throughput.py --workers 16 --episodes 300 --serial-episodes 40 \
+        --reference-serial --json gpu16.json
     python benchmarks/bench_throughput.py --workers 16 --render-device cpu --json gpu16_cpu.json
     python benchmarks/bench_throughput.py --workers 16 --render-device cpu \
         --gpu-render-workers 2 --json gpu16_mixed2.json
