@@ -11,8 +11,9 @@ Seeds and determinism
     Attempt ``k`` resets the env with seed ``start_seed + k`` (default start seed 0, as
     the upstream PPO collector: training seeds stay far below the benchmark's
     4242424242+). Failed attempts are skipped, so episode ``i`` is the ``i``-th successful
-    attempt in seed order. An episode depends only on its seed (the env is reseeded, the
-    oracle reset and the global RNGs seeded per attempt), so the same command writes
+    attempt in seed order. An episode depends only on its seed (every attempt starts on a
+    freshly built scene, as PhysX keeps contact caches across plain resets; the oracle is
+    reset and the global RNGs seeded per attempt), so the same command writes
     byte-identical files, and any number of workers writes the same files as one.
 
 Parallelism
@@ -234,7 +235,9 @@ class _AttemptRunner:
         env, oracle = self.env, self.oracle
         max_steps = int(env.max_episode_steps)
         _seed_global_rngs(seed)
-        obs, info = env.reset(seed=seed)
+        # A fresh scene: after a plain reset the episode would depend, in the last bits, on
+        # the attempts this worker ran before (PhysX contact caches).
+        obs, info = env.reset(seed=seed, options={"reconfigure": True})
         oracle.reset()
         language = _language(info)
         frames: dict[str, list[Any]] = {
