@@ -55,7 +55,7 @@ EPISODES_PER_SCENE: int = 5
 ``5k``. PhysX keeps contact caches across resets, so an episode's numbers depend (in the
 last bits) on the episodes run before it on its scene; fixing that history makes every
 episode's result independent of the worker count and of how episodes are scheduled, at
-the cost of one scene build per 5 episodes (~0.3 s on CPU). The reference runner plays all
+the cost of one scene build per 5 episodes (~0.1 s on CPU). The reference runner plays all
 50 episodes on one scene: its returns can differ from ours in the last bits."""
 
 
