@@ -648,3 +648,11 @@ def test_cli_usage_errors(tmp_path, capsys):
     assert "do not pass --policy" in capsys.readouterr().err
     assert cli.main(["run", "--resume", str(tmp_path / "missing")]) == 2
     assert "does not exist" in capsys.readouterr().err
+    # A bad executor option is refused before anything is written.
+    out = tmp_path / "never"
+    argv = ["run", "--task", "RememberColor3-VLA-v0", "--policy", "zero", "--out", str(out)]
+    assert cli.main([*argv, "--envs-per-worker", "0"]) == 2
+    assert "--envs-per-worker must be >= 1" in capsys.readouterr().err
+    assert cli.main([*argv, "--workers", "0", "--envs-per-worker", "2"]) == 2
+    assert "only used by the local executor" in capsys.readouterr().err
+    assert not out.exists()

@@ -328,17 +328,28 @@ def _resume_dirs(path: str) -> list[Path]:
     )
 
 
-def _execute_and_report(
-    stores: list[Any], args: argparse.Namespace, report_dir: Path | None, report: bool = True
-) -> int:
+def _executor_from(args: argparse.Namespace) -> Any:
+    """The executor the options ask for (raises on a bad combination, before anything is
+    written)."""
     from .executor import make_executor
+
+    return make_executor(
+        args.executor, args.workers, address=args.address, envs_per_worker=args.envs_per_worker
+    )
+
+
+def _execute_and_report(
+    stores: list[Any],
+    args: argparse.Namespace,
+    report_dir: Path | None,
+    report: bool = True,
+    executor: Any = None,
+) -> int:
     from .report import text_table, write_report
     from .results import load_run
     from .runner import execute_runs
 
-    executor = make_executor(
-        args.executor, args.workers, address=args.address, envs_per_worker=args.envs_per_worker
-    )
+    executor = executor if executor is not None else _executor_from(args)
     dirs = ", ".join(str(s.run_dir) for s in stores)
     pending = sum(len(s.pending()) for s in stores)
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
@@ -392,6 +403,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .results import RunStore
     from .tasks import benchmark_commit, make_run_dir, resolve_tasks
 
+    executor = _executor_from(args)
     if args.resume:
         given = [
             f"--{k.replace('_', '-')}"
@@ -404,7 +416,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             )
         stores = [RunStore.open(d) for d in _resume_dirs(args.resume)]
         report_dir = stores[0].run_dir if len(stores) == 1 else stores[0].run_dir.parent
-        return _execute_and_report(stores, args, report_dir, report=not args.no_report)
+        return _execute_and_report(stores, args, report_dir, not args.no_report, executor)
 
     if not args.split and not args.task:
         raise BenchError(
@@ -447,7 +459,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 commit=commit,
             )
         )
-    return _execute_and_report(stores, args, base, report=not args.no_report)
+    return _execute_and_report(stores, args, base, not args.no_report, executor)
 
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
@@ -457,6 +469,7 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise BenchError(f"--episodes must be >= 1, got {args.episodes}")
+    executor = _executor_from(args)
     config = BenchmarkConfig(
         n_episodes=args.episodes, obs_mode=args.obs_mode, sim_backend=DEFAULT_SIM_BACKEND
     )
@@ -489,7 +502,7 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
             )
         stores.append(store)
     t0 = time.perf_counter()
-    rc = _execute_and_report(stores, args, out)
+    rc = _execute_and_report(stores, args, out, executor=executor)
     if rc == 0:
         print(f"quickstart total wall time {time.perf_counter() - t0:.1f} s")
     return rc
