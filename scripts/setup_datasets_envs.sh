@@ -34,6 +34,7 @@ PINS=(
   # TFDS 4.9.10 touches importlib_resources for builders defined in an installed package
   # but does not declare it on Python >= 3.9.
   "importlib-resources>=6"
+  "isal==1.9.1"
   "torch==2.13.0"
   "torchvision==0.28.0"
   "torchcodec==0.13.0"
