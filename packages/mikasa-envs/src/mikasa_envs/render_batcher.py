@@ -81,7 +81,7 @@ class RenderBatcher:
     """Renders the cameras of envs stepped by several threads in shared GPU passes."""
 
     def __init__(self, group_factory: Callable[..., Any] = CameraGroupRenderer) -> None:
-        self._group_factory = group_factory  # (views, device) -> object with render_all()
+        self._group_factory = group_factory  # (views, device, first_group) -> .render_all(refresh)
         self._cond = threading.Condition()
         self._active = 0
         self._pending: list[_Request] = []
