@@ -41,7 +41,7 @@ from typing import Any
 from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import BenchError
 from .policies import PolicySpec, build_policy, policy_chunk_size
-from .protocol import EPISODES_PER_SCENE, BenchmarkConfig, starts_scene
+from .protocol import BenchmarkConfig, scene_start, starts_scene
 from .render import apply_environment, check_render_device, worker_environment
 from .tasks import BenchmarkTask
 
@@ -77,8 +77,8 @@ class EpisodeJob:
 
     @property
     def scene_key(self) -> Hashable:
-        """Jobs with equal keys play on one scene, in episode order (`EPISODES_PER_SCENE`)."""
-        return (self.run_index, self.env_key, self.episode // EPISODES_PER_SCENE)
+        """Jobs with equal keys play on one scene, in episode order (`protocol.scene_start`)."""
+        return (self.run_index, self.env_key, scene_start(self.episode))
 
     def seed_of(self, episode: int) -> int:
         """The seed of episode ``episode`` of this job's task."""
@@ -102,7 +102,8 @@ class EpisodeOutcome:
     render: str | None = None
     """Where the worker rendered, e.g. ``"cpu: llvmpipe (LLVM 15.0.6, 256 bits)"``."""
     setup_s: float = 0.0
-    """Part of ``wall_s`` spent building the env and policy (0 when they were cached)."""
+    """Part of ``wall_s`` spent building the env and policy and replaying the scene's earlier
+    episodes (0 when nothing had to be built or replayed)."""
     cpu_s: float = 0.0
     """CPU time of the worker process (all its threads, e.g. lavapipe's) over the
     episode, env build excluded: what an episode costs, whatever else runs on the host."""
@@ -156,10 +157,11 @@ class _EpisodeWorker:
         """Run one job; exceptions become an outcome with ``error`` set."""
         t0 = time.perf_counter()
         try:
+            cached = self.env_key == job.env_key and job.policy.key() in self.policies
             env = self._env_for(job)
             policy = self._policy_for(job, env)
-            self._replay_scene_history(job, env, policy)
-            setup_s = time.perf_counter() - t0
+            replayed = self._replay_scene_history(job, env, policy)
+            setup_s = 0.0 if cached and not replayed else time.perf_counter() - t0
             cpu0 = time.process_time()
             chunk = policy_chunk_size(policy)
             video = None
@@ -215,16 +217,17 @@ class _EpisodeWorker:
         self.last_played = (job.scene_key, episode)
         return result
 
-    def _replay_scene_history(self, job: EpisodeJob, env: Any, policy: Any) -> None:
+    def _replay_scene_history(self, job: EpisodeJob, env: Any, policy: Any) -> bool:
         """Play (and discard) the episodes that precede ``job`` on its scene, unless the
         env's scene just played them: the job's numbers then do not depend on which
         episodes this worker ran before (the scheduler hands out a scene's episodes in
-        order to one worker, so this only replays after a resume or an error)."""
-        first = job.episode - job.episode % EPISODES_PER_SCENE
-        if job.episode == first or self.last_played == (job.scene_key, job.episode - 1):
-            return
-        for episode in range(first, job.episode):
+        order to one worker, so this only replays after a resume or an error). Returns
+        whether it replayed."""
+        if starts_scene(job.episode) or self.last_played == (job.scene_key, job.episode - 1):
+            return False
+        for episode in range(scene_start(job.episode), job.episode):
             self._play(job, episode, env, policy)
+        return True
 
     def close(self) -> None:
         """Close the cached env and forget its policies."""
@@ -349,8 +352,9 @@ class _Scheduler:
     fixes; then the next unclaimed scene of the same task, keeping its env. A worker that
     needs a new env joins the task with the fewest workers on it (then the one with the
     most env steps left, so long-horizon tasks start early and do not trail the run), so
-    workers spread over tasks instead of all building every task's env in turn: measured on the GPU machine, an env build costs 2-5 s while 16 workers build
-    at once, as much as ~40 short episodes. Which worker runs an episode never changes its
+    workers spread over tasks instead of all building every task's env in turn: measured
+    on the GPU machine, an env build costs 2-5 s while 16 workers build at once, as much as
+    ~40 short episodes. Which worker runs an episode never changes its
     result (the workers replay a scene's earlier episodes if they must)."""
 
     def __init__(self, jobs: Sequence[EpisodeJob]) -> None:

@@ -23,6 +23,7 @@ __all__ = [
     "SUPPORTED_OBS_MODES",
     "NUM_ENVS",
     "EPISODES_PER_SCENE",
+    "scene_start",
     "starts_scene",
     "RENDER_DEVICES",
     "BenchmarkConfig",
@@ -59,9 +60,14 @@ the cost of one scene build per 5 episodes (~0.1 s on CPU). The reference runner
 50 episodes on one scene: its returns can differ from ours in the last bits."""
 
 
+def scene_start(episode: int) -> int:
+    """The first episode of the scene episode ``episode`` of a task plays on."""
+    return episode - episode % EPISODES_PER_SCENE
+
+
 def starts_scene(episode: int) -> bool:
     """Whether episode ``episode`` of a task starts on a freshly built scene."""
-    return episode % EPISODES_PER_SCENE == 0
+    return scene_start(episode) == episode
 
 RENDER_DEVICES: tuple[str, ...] = ("auto", "cpu", "gpu")
 """Where a worker renders its cameras. ``auto``: ManiSkill's default (a CUDA GPU if there is

@@ -35,10 +35,10 @@ Feature spec (spec §6.3, one RLDS episode per NPZ file)::
 has set exactly at the last step, so they equal the spec's ``t == T-1``); together with
 the metadata this makes NPZ -> RLDS -> NPZ exact, field for field.
 
-Images are PNG-encoded here (numpy + zlib: "Sub" filter, run-length strategy) and handed to
-TFDS as bytes: several times faster than TFDS' own TF-graph encoder, lossless, standard PNG
-that ``tf.image.decode_png`` reads. Encoding of upcoming episodes runs in a thread pool while
-TFDS serialises the current one (zlib releases the GIL).
+Images are PNG-encoded here (numpy "Sub" filter + ISA-L or zlib deflate) and handed to TFDS
+as bytes: several times faster than TFDS' own TF-graph encoder, lossless, standard PNG that
+``tf.image.decode_png`` reads. Encoding of upcoming episodes runs in a thread pool while
+TFDS serialises the current one (the deflate releases the GIL).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ from mani_skill.utils.scene_builder.table import TableSceneBuilder
 
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs import render_batcher
-from mikasa_envs.camera_group import CameraGroupRenderer, env_cameras, env_render_device
+from mikasa_envs.camera_group import CameraGroupRenderer, SceneCameras, env_cameras, env_render_device
 from mikasa_envs.robot import LightPandaWristCam
 
 ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
@@ -81,8 +81,7 @@ class MikasaVLABaseEnv(BaseEnv):
         self.oracle_info: torch.Tensor | None = None
         self._reward_dict: dict[str, torch.Tensor] | None = None
         self._camera_group: CameraGroupRenderer | None = None
-        self._camera_group_checked: object = None  # the scene `_camera_group_ok` is about
-        self._camera_group_ok = False
+        self._camera_view: SceneCameras | None | bool = False  # False: not checked for this scene
         try:
             super().__init__(*args, robot_uids=robot_uids, **kwargs)
         except AssertionError as err:
@@ -135,7 +134,7 @@ class MikasaVLABaseEnv(BaseEnv):
         self._human_render_cameras = dict()
         self.scene = None
         self._camera_group = None
-        self._camera_group_checked = None
+        self._camera_view = False
         batcher = render_batcher.active_batcher()
         if batcher is not None:
             batcher.forget(self)
@@ -152,27 +151,25 @@ class MikasaVLABaseEnv(BaseEnv):
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
         # CPU physics with GPU rendering: both cameras in one batched pass (camera_group.py);
         # envs stepped by several threads of one process share passes (render_batcher.py).
-        if not (apply_texture_transforms and self._camera_group_supported()):
+        view = self._group_camera_view() if apply_texture_transforms else None
+        if view is None:
             return super()._get_obs_sensor_data(apply_texture_transforms)
         batcher = render_batcher.active_batcher()
         if batcher is not None:
-            images = batcher.render(self, env_cameras(self), env_render_device(self))
+            images = batcher.render(self, view, env_render_device(self))
         else:
-            scene = self.scene.sub_scenes[0]
-            if self._camera_group is None or self._camera_group.scene is not scene:
-                self._camera_group = CameraGroupRenderer.for_env(self)
+            if self._camera_group is None:  # dropped with the scene by _clear
+                self._camera_group = CameraGroupRenderer([view], env_render_device(self))
             images = self._camera_group.render()
         return {name: {"rgb": image} for name, image in images.items()}
 
-    def _camera_group_supported(self) -> bool:
-        """Whether this env's current scene renders through a camera group (cached per scene)."""
-        scene = self.scene.sub_scenes[0] if self.scene is not None else None
-        if scene is None:
-            return False
-        if self._camera_group_checked is not scene:
-            self._camera_group_ok = CameraGroupRenderer.supported(self)
-            self._camera_group_checked = scene
-        return self._camera_group_ok
+    def _group_camera_view(self) -> SceneCameras | None:
+        """The scene and sensor cameras to render through a camera group, or None where
+        groups do not apply; checked once per scene (_clear forgets it)."""
+        if self._camera_view is False:
+            supported = self.scene is not None and CameraGroupRenderer.supported(self)
+            self._camera_view = env_cameras(self) if supported else None
+        return self._camera_view  # type: ignore[return-value]
 
     # ------------------------------------------------------------- episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:

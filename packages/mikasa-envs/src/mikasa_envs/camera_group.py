@@ -148,11 +148,6 @@ class CameraGroupRenderer:
         self._images = torch.zeros((len(cams), self.height, self.width, 3), dtype=torch.uint8).pin_memory()
         self._copied = torch.cuda.Event(blocking=True)  # waited on without spinning a core
 
-    @property
-    def scene(self) -> sapien.Scene:
-        """The first (for a single-scene group: the) scene."""
-        return self.scenes[0]
-
     def render_all(self, refresh: Sequence[int] | None = None) -> list[dict[str, torch.Tensor]]:
         """Render every camera: per scene, name -> uint8 [1, H, W, 3] on the CPU, with the
         rest of a CPU-simulated env's observation.
@@ -163,10 +158,10 @@ class CameraGroupRenderer:
         read: see render_batcher.py.)"""
         indices = range(len(self.scenes)) if refresh is None else refresh
         for i in indices:
-            scene, (first, rows) = self.scenes[i], self._rows[i]
-            packed = packed_poses(scene)[rows]
-            self._host_np[first : first + len(rows), 0:3] = packed[:, 4:7]
-            self._host_np[first : first + len(rows), 3:7] = packed[:, 0:4]
+            start, rows = self._rows[i]
+            packed = packed_poses(self.scenes[i])[rows]
+            self._host_np[start : start + len(rows), 0:3] = packed[:, 4:7]
+            self._host_np[start : start + len(rows), 3:7] = packed[:, 0:4]
         self._device_poses.copy_(self._host_poses, non_blocking=True)
         self._group.update_render()
         self._cameras.take_picture()
@@ -206,11 +201,6 @@ class CameraGroupRenderer:
             and len(s.camera._render_cameras) == 1
             for s in sensors.values()
         )
-
-    @classmethod
-    def for_env(cls, env: Any) -> CameraGroupRenderer:
-        """The renderer for a ManiSkill env's sensors (call `supported` first)."""
-        return cls([env_cameras(env)], env_render_device(env))
 
 
 def env_cameras(env: Any) -> SceneCameras:
