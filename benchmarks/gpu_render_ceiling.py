@@ -6,9 +6,16 @@ are timed over the same window. This is the ceiling the bench's GPU workers run 
 
     python benchmarks/gpu_render_ceiling.py 1x1 1x4 1x16 16x1 16x4 16x8
     python benchmarks/gpu_render_ceiling.py 16x4:panda          # robot hidden
+    python benchmarks/gpu_render_ceiling.py 16x4@1 16x4@4       # at most 1 / 4 passes at once
 
-A spec is ``PROCESSESxSCENES[:HIDE]``; HIDE is a comma-separated list of entity-name parts
-whose render bodies are hidden. Measured on an H200 (2026-11-22): 1x1 792 scenes/s, 1x16
+    python benchmarks/gpu_render_ceiling.py 1x16/64 1x16/256     # cameras of 64x64, 256x256
+    python benchmarks/gpu_render_ceiling.py 1x16+24               # 24 small boxes added
+
+A spec is ``PROCESSESxSCENES[+BOXES][@CONCURRENT][/SIZE][:HIDE]``; BOXES adds that many
+small boxes (12 triangles each, one draw each) in view of both cameras; CONCURRENT caps how many
+processes render at the same time (a shared semaphore around each pass; default: no cap);
+SIZE sets both cameras to SIZExSIZE (default: the env's 128x128); HIDE is a
+comma-separated list of entity-name parts whose render bodies are hidden. Measured on an H200 (2026-11-22): 1x1 792 scenes/s, 1x16
 1,353, 16x1 750, 16x4 1,102, 16x8 1,213, 16x4 without the robot 1,611.
 """
 
@@ -24,7 +31,22 @@ ENV_ID = "RememberColor3-VLA-v0"
 DURATION_S = 6.0
 
 
-def worker(k: int, hide: str, barrier: Any, results: Any) -> None:
+def add_boxes(scene: Any, n: int) -> None:
+    """``n`` small static grey boxes in a row above the table, one render body each."""
+    import sapien
+
+    material = sapien.render.RenderMaterial(base_color=[0.5, 0.5, 0.5, 1.0])
+    for i in range(n):
+        body = sapien.render.RenderBodyComponent()
+        body.attach(sapien.render.RenderShapeBox([0.01, 0.01, 0.01], material))
+        entity = sapien.Entity()
+        entity.name = f"probe_box_{i}"
+        entity.add_component(body)
+        entity.set_pose(sapien.Pose([-0.1 + 0.3 * (i % 8) / 8, -0.15 + 0.1 * (i // 8), 0.05]))
+        scene.add_entity(entity)
+
+
+def worker(k: int, boxes: int, size: int, hide: str, slots: Any, barrier: Any, results: Any) -> None:
     """Build ``k`` envs, render them in one group until the window closes; report passes."""
     os.environ["MIKASA_CAMERA_GROUP"] = "0"  # the envs' own groups stay unbuilt
     import gymnasium as gym
@@ -33,10 +55,13 @@ def worker(k: int, hide: str, barrier: Any, results: Any) -> None:
     from mikasa_envs.camera_group import CameraGroupRenderer, env_cameras, env_render_device
 
     torch.set_num_threads(1)
-    envs = [gym.make(ENV_ID, obs_mode="rgb", sim_backend="cpu") for _ in range(k)]
+    extra = {"sensor_configs": {"width": size, "height": size}} if size else {}
+    envs = [gym.make(ENV_ID, obs_mode="rgb", sim_backend="cpu", **extra) for _ in range(k)]
     for i, env in enumerate(envs):
         env.reset(seed=i)
     views = [env_cameras(env.unwrapped) for env in envs]
+    for scene, _ in views:
+        add_boxes(scene, boxes)
     for scene, _ in views:
         for body in scene.render_system.render_bodies:
             if hide and any(part in body.entity.name for part in hide.split(",")):
@@ -47,7 +72,11 @@ def worker(k: int, hide: str, barrier: Any, results: Any) -> None:
     barrier.wait()
     t0, passes = time.perf_counter(), 0
     while time.perf_counter() - t0 < DURATION_S:
-        group.render_all()
+        if slots is None:
+            group.render_all()
+        else:
+            with slots:
+                group.render_all()
         passes += 1
     results.put((passes, time.perf_counter() - t0))
 
@@ -57,9 +86,13 @@ def main(specs: list[str]) -> int:
     ctx = mp.get_context("spawn")
     for spec in specs or ["1x1", "16x4"]:
         shape, _, hide = spec.partition(":")
+        shape, _, size = shape.partition("/")
+        shape, _, cap = shape.partition("@")
+        shape, _, boxes = shape.partition("+")
         p, k = (int(x) for x in shape.split("x"))
+        slots = ctx.BoundedSemaphore(int(cap)) if cap else None
         barrier, results = ctx.Barrier(p), ctx.Queue()
-        procs = [ctx.Process(target=worker, args=(k, hide, barrier, results)) for _ in range(p)]
+        procs = [ctx.Process(target=worker, args=(k, int(boxes or 0), int(size or 0), hide, slots, barrier, results)) for _ in range(p)]
         for proc in procs:
             proc.start()
         got = [results.get(timeout=300) for _ in procs]
@@ -67,7 +100,10 @@ def main(specs: list[str]) -> int:
             proc.join()
         passes, window = sum(n for n, _ in got), max(w for _, w in got)
         print(
-            f"{p} processes x {k} scenes{f' (hidden: {hide})' if hide else ''}: "
+            f"{p} processes x {k} scenes{f' + {boxes} boxes' if boxes else ''}"
+            f"{f', {cap} at once' if cap else ''}"
+            f"{f', {size}x{size}' if size else ''}"
+            f"{f' (hidden: {hide})' if hide else ''}: "
             f"{passes * k / window:.0f} scenes/s, {passes / window:.0f} passes/s",
             flush=True,
         )

@@ -21,7 +21,14 @@ from mani_skill.utils.scene_builder.table import TableSceneBuilder
 
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs import render_batcher
-from mikasa_envs.camera_group import CameraGroupRenderer, SceneCameras, env_cameras, env_render_device
+from mikasa_envs.camera_group import (
+    CameraGroupRenderer,
+    SceneCameras,
+    env_cameras,
+    env_render_device,
+    read_rgb_pictures,
+    rgb_cameras_readable,
+)
 from mikasa_envs.robot import LightPandaWristCam
 
 ROBOT_ROOT_POSITION = (-0.615, 0.0, 0.0)
@@ -82,6 +89,7 @@ class MikasaVLABaseEnv(BaseEnv):
         self._reward_dict: dict[str, torch.Tensor] | None = None
         self._camera_group: CameraGroupRenderer | None = None
         self._camera_view: SceneCameras | None | bool = False  # False: not checked for this scene
+        self._render_on_gpu = False  # with _camera_view: through a camera group
         try:
             super().__init__(*args, robot_uids=robot_uids, **kwargs)
         except AssertionError as err:
@@ -151,11 +159,15 @@ class MikasaVLABaseEnv(BaseEnv):
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
         # CPU physics with GPU rendering: both cameras in one batched pass (camera_group.py);
         # envs stepped by several threads of one process share passes (render_batcher.py).
-        view = self._group_camera_view() if apply_texture_transforms else None
+        # CPU rendering: ManiSkill's own capture, pictures read without its extra copy.
+        view = self._sensor_camera_view() if apply_texture_transforms else None
         if view is None:
             return super()._get_obs_sensor_data(apply_texture_transforms)
-        batcher = render_batcher.active_batcher()
-        if batcher is not None:
+        if not self._render_on_gpu:
+            self.scene.update_render(update_sensors=True, update_human_render_cameras=False)
+            self.capture_sensor_data()
+            images = read_rgb_pictures(view[1])
+        elif (batcher := render_batcher.active_batcher()) is not None:
             images = batcher.render(self, view, env_render_device(self))
         else:
             if self._camera_group is None:  # dropped with the scene by _clear
@@ -163,12 +175,13 @@ class MikasaVLABaseEnv(BaseEnv):
             images = self._camera_group.render()
         return {name: {"rgb": image} for name, image in images.items()}
 
-    def _group_camera_view(self) -> SceneCameras | None:
-        """The scene and sensor cameras to render through a camera group, or None where
-        groups do not apply; checked once per scene (_clear forgets it)."""
+    def _sensor_camera_view(self) -> SceneCameras | None:
+        """The scene and sensor cameras to read rgb from ourselves, or None where ManiSkill's
+        path is needed; checked once per scene (_clear forgets it)."""
         if self._camera_view is False:
-            supported = self.scene is not None and CameraGroupRenderer.supported(self)
-            self._camera_view = env_cameras(self) if supported else None
+            readable = self.scene is not None and rgb_cameras_readable(self)
+            self._render_on_gpu = readable and CameraGroupRenderer.supported(self)
+            self._camera_view = env_cameras(self) if readable else None
         return self._camera_view  # type: ignore[return-value]
 
     # ------------------------------------------------------------- episodes
