@@ -15,8 +15,16 @@ A spec is ``PROCESSESxSCENES[+BOXES][@CONCURRENT][/SIZE][:HIDE]``; BOXES adds th
 small boxes (12 triangles each, one draw each) in view of both cameras; CONCURRENT caps how many
 processes render at the same time (a shared semaphore around each pass; default: no cap);
 SIZE sets both cameras to SIZExSIZE (default: the env's 128x128); HIDE is a
-comma-separated list of entity-name parts whose render bodies are hidden. Measured on an H200 (2026-11-22): 1x1 792 scenes/s, 1x16
-1,353, 16x1 750, 16x4 1,102, 16x8 1,213, 16x4 without the robot 1,611.
+comma-separated list of entity-name parts whose render bodies are hidden.
+
+Measured on an H200 (2026-11-22): 1x1 792 scenes/s, 1x16 1,353, 16x1 750, 16x4 1,102, 16x8
+1,213, 16x4 without the robot 1,611. On an H100 (same day): 1x1 1,090, 1x4 1,950, 1x16
+2,300-2,400, 4x4 1,898, 8x4 1,812, 16x4 1,755-1,785; capping concurrent passes changes
+little (16x4@1 1,810, @2 1,883, @4 1,828); camera size little (1x16/64 2,598, /256 1,762);
+24 extra boxes (24 more draws) nothing (2,397); hiding the robot (24 draws, 53k vertices)
+2.5x (5,900-6,100), hiding everything 8,606. So the GPU's cost is the robot's geometry, not
+draws, pixels or process count; a cheaper vertex shader (no per-vertex matrix inverse)
+measured the same. Pixel-identical rendering cannot go much past ~2,300 scenes/s there.
 """
 
 from __future__ import annotations
