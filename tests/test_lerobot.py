@@ -117,6 +117,58 @@ else:
                 worst.append(lr.psnr(a["rgb"][..., cam], b["rgb"][..., cam]))
         assert min(worst) >= MIN_PSNR_DB, f"video PSNR per camera-episode {worst}"
 
+    def test_image_stats_are_the_frames_stats(npz_task: Path, from_npz: lr.ConversionResult) -> None:
+        # lerobot 0.4.x squares uint8 pixels in uint8 (wrapping) and wrote a wrong std.
+        stats = json.loads((from_npz.path / "meta" / "stats.json").read_text())
+        source = load_episodes(npz_task)
+        for key, cam in ((lr.TOP_KEY, slice(0, 3)), (lr.WRIST_KEY, slice(3, 6))):
+            pixels = np.concatenate([e["rgb"][..., cam].reshape(-1, 3) for e in source]) / 255.0
+            for name, expected in (("mean", pixels.mean(0)), ("std", pixels.std(0))):
+                got = np.ravel(stats[key][name])
+                np.testing.assert_allclose(got, expected, rtol=1e-9, err_msg=f"{key} {name}")
+        # the writer's fixes to lerobot last only as long as the write
+        from lerobot.datasets import compute_stats
+        from lerobot.datasets import lerobot_dataset as lerobot_module
+        from lerobot.datasets import utils as lerobot_utils
+
+        assert lerobot_module.embed_images is lerobot_utils.embed_images
+        assert not hasattr(compute_stats.RunningQuantileStats.update, "__wrapped__")
+
+    def test_uint8_stats_equal_lerobots_on_promoted_values() -> None:
+        from lerobot.datasets.compute_stats import RunningQuantileStats
+
+        rng = np.random.default_rng(3)
+        # narrow first, then wider ranges: the histograms are re-binned as lerobot does
+        batches = [rng.integers(100, 140, (500, 3), dtype=np.uint8)]
+        batches += [rng.integers(lo, hi, (700, 3), dtype=np.uint8) for lo, hi in ((90, 150), (0, 256), (5, 60))]
+        reference, ours = RunningQuantileStats(), RunningQuantileStats()
+        for batch in batches:
+            reference.update(batch.astype(np.float64))  # upstream's fix promotes; float64 is exact
+            lr._update_from_value_counts(ours, batch)
+        for a, b in zip(reference._histograms, ours._histograms, strict=True):
+            assert np.array_equal(a, b)
+        expected, got = reference.get_statistics(), ours.get_statistics()
+        assert expected.keys() == got.keys()
+        for key in expected:
+            np.testing.assert_allclose(got[key], expected[key], rtol=1e-12, err_msg=key)
+
+    def test_video_files_are_cut_and_still_load(
+        npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        # A tiny file size: every episode starts a new video file (no whole-file re-mux).
+        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
+        r = lr.convert_npz_to_lerobot(npz_task, tmp_path)
+        for key in (lr.TOP_KEY, lr.WRIST_KEY):
+            assert len(list((r.path / "videos" / key).rglob("*.mp4"))) == len(LENGTHS)
+        a, b = load_episodes(npz_task), load_episodes(r.path)
+        for x, y in zip(a, b, strict=True):
+            assert np.array_equal(x["proprio"], y["proprio"])
+            assert lr.psnr(x["rgb"], y["rgb"]) >= MIN_PSNR_DB
+        dataset = lr.lerobot_dataset_class()(NAME, root=r.path)
+        last = dataset[len(dataset) - 1]
+        frame = (last[lr.TOP_KEY].numpy().transpose(1, 2, 0) * 255).round().astype(np.uint8)
+        assert lr.psnr(frame, a[-1]["rgb"][-1, ..., :3]) > 30.0
+
     def test_loads_offline_with_lerobot_dataset(from_npz: lr.ConversionResult) -> None:
         import os
 
