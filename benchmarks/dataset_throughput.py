@@ -9,7 +9,18 @@ Reports frames/s (wall clock, library imports excluded), CPU seconds (all thread
 CPU-ms per frame, the machine's load average around each run (this box is shared: a load
 above the core count inflates wall time), and the video PSNR of the LeRobot output against
 the NPZ frames. Targets (issue 4): >= 1,000 frames/s NPZ -> RLDS, >= 300 frames/s for the
-LeRobot paths on the 2-core machine. Collection episodes/min is benchmarked elsewhere.
+LeRobot paths on the 2-core machine.
+
+Collection (``--paths collect``, or with the others): oracle episodes per minute of
+``mikasa-collect`` for one task of every task family that has envs, with 1 and 2 workers
+(``--collect-workers``), run in the simulator's environment (``.venv``; this script starts
+it there); families without envs yet are listed as such::
+
+    .venv-datasets/bin/python benchmarks/dataset_throughput.py --paths collect --collect-episodes 8
+
+Short runs are start-up bound (each worker imports the simulator and builds its env; with
+lavapipe the first build compiles shaders): 2 workers only pay off over longer runs
+(``--collect-episodes 40 --collect-families remember_color``).
 """
 
 from __future__ import annotations
@@ -18,6 +29,7 @@ import argparse
 import json
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -56,6 +68,84 @@ def _timed(label: str, fn, frames_hint: int | None = None) -> dict:
     return row
 
 
+REPO = Path(__file__).resolve().parent.parent
+SIM_PYTHON = REPO / ".venv" / "bin" / "python"
+
+
+def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
+    """(In the simulator's environment) collect, print the summary as one JSON line."""
+    from mikasa_oracles.collect import collect
+
+    s = collect(env_id, episodes, out, workers=workers, progress=False)
+    row = {
+        "env_id": env_id,
+        "workers": workers,
+        "episodes": s.new_episodes,
+        "frames": s.frames,
+        "wall_s": round(s.wall_s, 2),
+        "episodes_per_min": round(s.episodes_per_min, 1),
+        "success_rate": round(s.success_rate, 3),
+    }
+    print("COLLECT " + json.dumps(row), flush=True)
+
+
+def family_representatives() -> tuple[dict[str, str], list[str]]:
+    """(family -> its shortest-horizon registered canonical task, families without envs),
+    read from the manifest in the simulator's environment."""
+    code = (
+        "import json, mikasa_envs\n"
+        "from mikasa_envs.manifest import list_tasks\n"
+        "reg = set(mikasa_envs.registered_env_ids())\n"
+        "rows = [(t.family, t.max_episode_steps, t.env_id, t.env_id in reg) for t in list_tasks()]\n"
+        "print('FAMILIES ' + json.dumps(rows))\n"
+    )
+    out = subprocess.run([str(SIM_PYTHON), "-c", code], capture_output=True, text=True, check=True).stdout
+    rows = json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
+    chosen: dict[str, tuple[int, str]] = {}
+    for family, horizon, env_id, registered in rows:
+        if registered and (family not in chosen or horizon < chosen[family][0]):
+            chosen[family] = (horizon, env_id)
+    missing = sorted({family for family, *_ in rows} - set(chosen))
+    return {f: e for f, (_, e) in sorted(chosen.items())}, missing
+
+
+def collection_rows(
+    episodes: int, workers: list[int], work: Path, only: set[str] | None = None
+) -> list[dict]:
+    """Collect ``episodes`` oracle episodes per family representative (of the families in
+    ``only``, default all) and worker count."""
+    if not SIM_PYTHON.is_file():
+        print(f"collection: skipped, no simulator environment at {SIM_PYTHON} (scripts/setup.sh)")
+        return []
+    reps, missing = family_representatives()
+    if only:
+        reps = {f: e for f, e in reps.items() if f in only}
+    print(f"collection: {episodes} episodes per run; families without envs yet: {len(missing)}")
+    rows = []
+    for family, env_id in reps.items():
+        for w in workers:
+            out = work / f"collect_{family}_{w}"
+            proc = subprocess.run(
+                [str(SIM_PYTHON), __file__, "--_collect-child", env_id, str(episodes), str(w), str(out)],
+                capture_output=True,
+                text=True,
+            )
+            lines = [x for x in proc.stdout.splitlines() if x.startswith("COLLECT ")]
+            if proc.returncode != 0 or not lines:
+                raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
+            row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
+            print(
+                f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min "
+                f"({row['episodes']} ep, {row['frames']} frames, {row['wall_s']:.1f} s, success {row['success_rate']:.0%})",
+                flush=True,
+            )
+            rows.append(row)
+            shutil.rmtree(out, ignore_errors=True)
+    for family in missing:
+        print(f"collect {family:<30} (no env yet)")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -75,14 +165,39 @@ def main(argv: list[str] | None = None) -> int:
         help="with --npz: convert its episodes this many times over (a bigger task from a few real episodes)",
     )
     parser.add_argument(
-        "--paths", default="npz-rlds,rlds-lerobot,npz-lerobot", help="comma-separated subset to run"
+        "--paths",
+        default="npz-rlds,rlds-lerobot,npz-lerobot",
+        help="comma-separated subset to run, of npz-rlds, rlds-lerobot, npz-lerobot, collect",
     )
+    parser.add_argument("--collect-episodes", type=int, default=8, help="episodes per collection run")
+    parser.add_argument("--collect-workers", default="1,2", help="worker counts to collect with")
+    parser.add_argument("--collect-families", help="comma-separated families (default: all with envs)")
+    parser.add_argument("--_collect-child", nargs=4, help=argparse.SUPPRESS)
     parser.add_argument("--vcodec", default="libsvtav1")
     parser.add_argument("--json", type=Path, help="also write the rows as JSON here")
     parser.add_argument(
         "--keep", type=Path, help="work directory to keep (default: a deleted temp dir)"
     )
     args = parser.parse_args(argv)
+    if args._collect_child:
+        env_id, episodes, workers, out = args._collect_child
+        collect_child(env_id, int(episodes), int(workers), out)
+        return 0
+    paths = set(args.paths.split(","))
+    if paths == {"collect"}:
+        work = Path(tempfile.mkdtemp(prefix="mikasa-collect-bench-"))
+        try:
+            rows = collection_rows(
+                args.collect_episodes,
+                [int(w) for w in args.collect_workers.split(",")],
+                work,
+                set(args.collect_families.split(",")) if args.collect_families else None,
+            )
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=2) + "\n")
+        return 0
 
     from mikasa_datasets import lerobot as lr
     from mikasa_datasets import rlds
@@ -119,7 +234,6 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng(0)
             lengths = [int(x) for x in rng.integers(args.min_len, args.max_len + 1, args.episodes)]
             npz_task = write_synthetic_task(work / "data_npz", "RememberColor3-VLA-v0", lengths)
-        paths = set(args.paths.split(","))
         print(f"source: {npz_task}  (cores: {os.cpu_count()}, vcodec: {args.vcodec})")
         rows = []
         rlds_dir = None
@@ -170,6 +284,13 @@ def main(argv: list[str] | None = None) -> int:
                     "min_db": round(min(values), 2),
                     "mean_db": round(float(np.mean(values)), 2),
                 }
+            )
+        if "collect" in paths:
+            rows += collection_rows(
+                args.collect_episodes,
+                [int(w) for w in args.collect_workers.split(",")],
+                work,
+                set(args.collect_families.split(",")) if args.collect_families else None,
             )
         if args.json:
             args.json.write_text(json.dumps(rows, indent=2) + "\n")

@@ -109,7 +109,7 @@ def compare_threads(env_ids: list[str], threads: int = 4) -> tuple[int, int]:
     for k, env_id in enumerate(ids):
         if len(batched[k]) != len(reference[k]):
             raise SystemExit(f"thread {k} ({env_id}) did not finish its episode")
-        deltas = [np.abs(a.astype(np.int16) - b) for a, b in zip(reference[k], batched[k])]
+        deltas = [np.abs(a.astype(np.int16) - b) for a, b in zip(reference[k], batched[k], strict=True)]
         diffs = [int(d.max()) for d in deltas]
         over = sum(int((d > TOLERANCE).sum()) for d in deltas)
         over_all, total = over_all + over, total + sum(d.size for d in deltas)

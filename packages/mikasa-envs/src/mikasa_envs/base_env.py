@@ -19,8 +19,8 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
 
-from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs import render_batcher
+from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs.camera_group import (
     CameraGroupRenderer,
     SceneCameras,

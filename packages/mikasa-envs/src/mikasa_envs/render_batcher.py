@@ -201,7 +201,7 @@ class RenderBatcher:
         waiting = {id(r.owner) for r in batch}
         refresh = [i for i, key in enumerate(self._order) if key in waiting]
         pictures = self._group.render_all(refresh)
-        return dict(zip(self._order, pictures))
+        return dict(zip(self._order, pictures, strict=True))
 
 
 _installed: RenderBatcher | None = None

@@ -71,7 +71,7 @@ def serve_job_slots(
             name=f"worker-slot-{wid}",
             daemon=True,
         )
-        for wid, inbox in zip(worker_ids, inboxes)
+        for wid, inbox in zip(worker_ids, inboxes, strict=True)
     ]
     for t in threads:
         t.start()
