@@ -152,6 +152,19 @@ else:
         for key in expected:
             np.testing.assert_allclose(got[key], expected[key], rtol=1e-12, err_msg=key)
 
+    def test_writer_fixes_nest_and_are_undone() -> None:
+        from lerobot.datasets import compute_stats
+        from lerobot.datasets import lerobot_dataset as lerobot_module
+
+        original = (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images)
+        with lr._lerobot_writer_fixes():
+            patched = (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images)
+            assert patched[0] is not original[0] and patched[1] is not original[1]
+            with lr._lerobot_writer_fixes():  # a second write, e.g. in another thread
+                pass
+            assert (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images) == patched
+        assert (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images) == original
+
     def test_video_files_are_cut_and_still_load(
         npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     ) -> None:

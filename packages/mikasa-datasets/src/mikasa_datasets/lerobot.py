@@ -264,6 +264,11 @@ def _patch_running_stats(stats_class: type) -> Callable[[], None]:
     return lambda: setattr(stats_class, "update", original_update)
 
 
+_FIXES_LOCK = threading.Lock()
+_fixes_depth = 0
+_undo_fixes: list[Callable[[], None]] = []
+
+
 @contextlib.contextmanager
 def _lerobot_writer_fixes() -> Iterator[None]:
     """Fixes to lerobot's writer, for the duration of a write, restored after:
@@ -272,11 +277,31 @@ def _lerobot_writer_fixes() -> Iterator[None]:
     * ``embed_images`` (a ``datasets`` map over every frame of every episode that embeds
       image files into the parquet table) skipped for episodes without image features:
       with cameras stored as videos it changes nothing and cost ~4 ms per frame.
+
+    The patches are lerobot's module attributes, so writes in several threads share them:
+    the first to enter applies them, the last to leave undoes them.
     """
+    global _fixes_depth
+    with _FIXES_LOCK:
+        if _fixes_depth == 0:
+            _undo_fixes[:] = _apply_writer_fixes()
+        _fixes_depth += 1
+    try:
+        yield
+    finally:
+        with _FIXES_LOCK:
+            _fixes_depth -= 1
+            if _fixes_depth == 0:
+                for undo in reversed(_undo_fixes):
+                    undo()
+                _undo_fixes.clear()
+
+
+def _apply_writer_fixes() -> list[Callable[[], None]]:
+    """Apply the fixes of `_lerobot_writer_fixes`; return their undos."""
     from lerobot.datasets import compute_stats
     from lerobot.datasets import lerobot_dataset as lerobot_module
 
-    stats_class = compute_stats.RunningQuantileStats
     original_embed = lerobot_module.embed_images
 
     def embed_images(dataset: Any) -> Any:
@@ -286,13 +311,9 @@ def _lerobot_writer_fixes() -> Iterator[None]:
             return original_embed(dataset)
         return dataset
 
-    undo_stats = _patch_running_stats(stats_class)
+    undo_stats = _patch_running_stats(compute_stats.RunningQuantileStats)
     lerobot_module.embed_images = embed_images
-    try:
-        yield
-    finally:
-        undo_stats()
-        lerobot_module.embed_images = original_embed
+    return [undo_stats, lambda: setattr(lerobot_module, "embed_images", original_embed)]
 
 
 def write_lerobot(
