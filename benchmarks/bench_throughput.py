@@ -40,7 +40,7 @@ workers on a 16-core GPU machine, over the serial reference runner where it was 
 meshes, i.e. the reference runner's loop), else over our own serial loop (stricter: our
 env's rendering makes a serial loop faster too). On the GPU machine the parallel rate is
 bounded by the GPU's graphics throughput, not by the cores: render-only, with no physics,
-an H100 draws at most 1,750-2,300 scenes (two 128x128 cameras) per second however the work
+an H100 draws at most 1,750-2,400 scenes (two 128x128 cameras) per second however the work
 is split over processes (`gpu_render_ceiling.py`; the robot's 53k vertices are most of the
 cost), the runner reaches 1,350-1,390 steps/s with the GPU 85-99% busy, and 12x our serial
 loop (~200 steps/s there) would need 2,400.
@@ -563,6 +563,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "speedup_end_to_end": ratio_e2e,
             "speedup_steady_state": ratio_steady,
             "target_speedup": target,
+            "target_met": None,
+            "target_baseline": None,
         }
         print(
             f"per-episode results identical (serial vs parallel, every round): "
