@@ -109,11 +109,12 @@ def family_representatives() -> tuple[dict[str, str], list[str]]:
     return {f: e for f, (_, e) in sorted(chosen.items())}, missing
 
 
-def collection_rows(
-    episodes: int, workers: list[int], work: Path, only: set[str] | None = None
-) -> list[dict]:
-    """Collect ``episodes`` oracle episodes per family representative (of the families in
-    ``only``, default all) and worker count."""
+def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
+    """Collect ``--collect-episodes`` oracle episodes per family representative (of
+    ``--collect-families``, default all) and per count of ``--collect-workers``."""
+    episodes = args.collect_episodes
+    workers = [int(w) for w in args.collect_workers.split(",")]
+    only = set(args.collect_families.split(",")) if args.collect_families else None
     if not SIM_PYTHON.is_file():
         print(f"collection: skipped, no simulator environment at {SIM_PYTHON} (scripts/setup.sh)")
         return []
@@ -187,12 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     if paths == {"collect"}:
         work = Path(tempfile.mkdtemp(prefix="mikasa-collect-bench-"))
         try:
-            rows = collection_rows(
-                args.collect_episodes,
-                [int(w) for w in args.collect_workers.split(",")],
-                work,
-                set(args.collect_families.split(",")) if args.collect_families else None,
-            )
+            rows = collection_rows(args, work)
         finally:
             shutil.rmtree(work, ignore_errors=True)
         if args.json:
@@ -286,12 +282,7 @@ def main(argv: list[str] | None = None) -> int:
                 }
             )
         if "collect" in paths:
-            rows += collection_rows(
-                args.collect_episodes,
-                [int(w) for w in args.collect_workers.split(",")],
-                work,
-                set(args.collect_families.split(",")) if args.collect_families else None,
-            )
+            rows += collection_rows(args, work)
         if args.json:
             args.json.write_text(json.dumps(rows, indent=2) + "\n")
     finally:

@@ -365,6 +365,11 @@ class _Scheduler:
             scenes.setdefault(job.scene_key, deque()).append(job)
         self.claimed: dict[Hashable, deque[EpisodeJob]] = {}
         """Scene key -> jobs left of a scene a worker is playing."""
+        self.steps_left: dict[Hashable, int] = {
+            key: sum(j.task.max_episode_steps for q in scenes.values() for j in q)
+            for key, scenes in self.unclaimed.items()
+        }
+        """Env key -> env steps of its unclaimed scenes (kept as scenes are claimed)."""
         self.holders: dict[Hashable, int] = {}
         """Env key -> workers whose last job was of that key."""
 
@@ -378,19 +383,18 @@ class _Scheduler:
                     return None
                 # A new env: the least-served task (order of the run as the last tie-break).
                 order = {k: i for i, k in enumerate(self.unclaimed)}
-                steps_left = {
-                    k: sum(j.task.max_episode_steps for q in v.values() for j in q)
-                    for k, v in self.unclaimed.items()
-                }
-                new = min(self.unclaimed, key=lambda k: (self.holders.get(k, 0), -steps_left[k], order[k]))
+                new = min(
+                    self.unclaimed, key=lambda k: (self.holders.get(k, 0), -self.steps_left[k], order[k])
+                )
                 if key is not None and self.holders.get(key):
                     self.holders[key] -= 1
                 self.holders[new] = self.holders.get(new, 0) + 1
                 key = new
             scenes = self.unclaimed[key]
             scene_key, scene = scenes.popitem(last=False)
+            self.steps_left[key] -= sum(j.task.max_episode_steps for j in scene)
             if not scenes:
-                del self.unclaimed[key]
+                del self.unclaimed[key], self.steps_left[key]
             self.claimed[scene_key] = scene
         job = scene.popleft()
         if not scene:

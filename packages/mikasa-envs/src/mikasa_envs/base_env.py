@@ -27,6 +27,7 @@ from mikasa_envs.camera_group import (
     env_cameras,
     env_render_device,
     read_rgb_pictures,
+    renders_on_cuda,
     rgb_cameras_readable,
 )
 from mikasa_envs.robot import LightPandaWristCam
@@ -180,7 +181,7 @@ class MikasaVLABaseEnv(BaseEnv):
         path is needed; checked once per scene (_clear forgets it)."""
         if self._camera_view is False:
             readable = self.scene is not None and rgb_cameras_readable(self)
-            self._render_on_gpu = readable and CameraGroupRenderer.supported(self)
+            self._render_on_gpu = readable and renders_on_cuda(self)
             self._camera_view = env_cameras(self) if readable else None
         return self._camera_view  # type: ignore[return-value]
 

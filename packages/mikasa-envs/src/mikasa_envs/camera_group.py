@@ -50,6 +50,7 @@ __all__ = [
     "check_pose_layout",
     "packed_poses",
     "read_rgb_pictures",
+    "renders_on_cuda",
     "rgb_cameras_readable",
 ]
 
@@ -196,11 +197,12 @@ class CameraGroupRenderer:
     @staticmethod
     def supported(env: Any) -> bool:
         """Whether ``env`` (a ManiSkill BaseEnv) can render its sensors through a group."""
-        return (
-            torch.cuda.is_available()
-            and rgb_cameras_readable(env)
-            and env.backend.render_device.is_cuda()
-        )
+        return rgb_cameras_readable(env) and renders_on_cuda(env)
+
+
+def renders_on_cuda(env: Any) -> bool:
+    """Whether ``env`` (a ManiSkill BaseEnv) renders on a CUDA device torch can use."""
+    return torch.cuda.is_available() and env.backend.render_device.is_cuda()
 
 
 def rgb_cameras_readable(env: Any) -> bool:
