@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import torch
@@ -10,20 +12,27 @@ from mikasa_envs import get_task
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_wrappers import apply_mikasa_vla_wrappers
 
-INFO_KEYS = {
-    "elapsed_steps",
-    "obj_to_goal_pos",
-    "is_obj_placed",
-    "is_robot_static",
-    "success",
-    "task_cue",
-    "language_instruction",
-    "oracle_info",
-    "reward_dict",
+# Keys every task's info carries, and the ones the six selection families add (common.md §6).
+INFO_KEYS = {"elapsed_steps", "success", "task_cue", "language_instruction", "oracle_info", "reward_dict"}
+SELECTION_INFO_KEYS = INFO_KEYS | {"obj_to_goal_pos", "is_obj_placed", "is_robot_static"}
+SELECTION_FAMILIES = {
+    "remember_color",
+    "remember_shape",
+    "remember_shape_and_color",
+    "find_imposter_color",
+    "find_imposter_shape",
+    "find_imposter_shape_and_color",
 }
 
 
-def _state_dim(env) -> int:
+def _matches_instruction(instruction: str, env_id: str) -> bool:
+    """The instruction equals the manifest's, whose ``{field}`` placeholders match any value."""
+    template = get_task(env_id).language_instruction
+    pattern = "".join(".+" if part.startswith("{") else re.escape(part) for part in re.split(r"(\{\w+\})", template))
+    return isinstance(instruction, str) and re.fullmatch(pattern, instruction) is not None
+
+
+def _selection_state_dim(env) -> int:
     base = env.unwrapped
     oracle = 1 if base.oracle_info.ndim == 1 else base.oracle_info.shape[1]
     return 9 + 9 + 7 + oracle + 3 * base.num_objects
@@ -31,28 +40,37 @@ def _state_dim(env) -> int:
 
 @pytest.mark.parametrize("env_id", REGISTERED_IDS)
 def test_state_mode_contract(make_env, env_id):
+    selection = get_task(env_id).family in SELECTION_FAMILIES
+    keys = SELECTION_INFO_KEYS if selection else INFO_KEYS
     env = make_env(env_id, reward_mode="normalized_dense")
     base: MikasaVLABaseEnv = env.unwrapped
     obs, info = env.reset(seed=7)
-    assert obs.dtype == torch.float32 and obs.shape == (1, _state_dim(env))
-    assert INFO_KEYS - {"reward_dict"} <= set(info)
-    assert info["language_instruction"] == get_task(env_id).language_instruction
-    assert info["task_cue"] is None and info["reward_dict"] is None
-    assert info["oracle_info"].dtype == torch.uint8
-    lo, hi = base.CUE_PHASE_STEPS
-    assert lo <= int(base.cue_steps_per_env[0]) <= hi
-    lo, hi = base.EMPTY_PHASE_STEPS
-    assert lo <= int(base.empty_steps_per_env[0]) <= hi
+    assert obs.dtype == torch.float32 and obs.ndim == 2 and obs.shape[0] == 1
+    state_dim = obs.shape[1]
+    if selection:
+        assert state_dim == _selection_state_dim(env)
+        assert info["task_cue"] is None and info["oracle_info"].dtype == torch.uint8
+        lo, hi = base.CUE_PHASE_STEPS
+        assert lo <= int(base.cue_steps_per_env[0]) <= hi
+        lo, hi = base.EMPTY_PHASE_STEPS
+        assert lo <= int(base.empty_steps_per_env[0]) <= hi
+    assert keys - {"reward_dict"} <= set(info)
+    assert _matches_instruction(info["language_instruction"], env_id)
+    assert info["reward_dict"] is None
+    assert isinstance(info["oracle_info"], torch.Tensor) and info["oracle_info"].shape[0] == 1
     rewards = []
     for _ in range(3):
         obs, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
         rewards.append(float(reward[0]))
-        assert set(info) >= INFO_KEYS
+        assert set(info) >= keys
         assert not bool(terminated[0]) and not bool(truncated[0])
-        assert obs.shape == (1, _state_dim(env))
+        assert obs.shape == (1, state_dim) and obs.dtype == torch.float32
+        assert _matches_instruction(info["language_instruction"], env_id)
     assert all(0.0 <= r <= 1.0 for r in rewards)
     # reward_dict is one step stale (computed after the info is built), as upstream.
-    assert info["reward_dict"] is not None and "reaching_reward" in info["reward_dict"]
+    assert isinstance(info["reward_dict"], dict) and info["reward_dict"]
+    if selection:
+        assert "reaching_reward" in info["reward_dict"]
 
 
 @pytest.mark.parametrize("env_id", REGISTERED_IDS)
@@ -65,7 +83,7 @@ def test_rgb_mode_through_canonical_wrappers(make_env, env_id):
     obs, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
     assert obs["rgb"].shape == (1, 128, 128, 6)
     assert 0.0 <= float(reward[0]) <= 1.0
-    assert info["language_instruction"] == get_task(env_id).language_instruction
+    assert _matches_instruction(info["language_instruction"], env_id)
     assert env.max_episode_steps == get_task(env_id).max_episode_steps
     # Both cameras see something (not a blank frame).
     assert obs["rgb"][..., :3].float().std() > 5 and obs["rgb"][..., 3:].float().std() > 5

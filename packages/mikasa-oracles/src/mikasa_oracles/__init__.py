@@ -2,25 +2,18 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 
+from mikasa_oracles.families import ALL_ORACLES
+from mikasa_oracles.families.selection import SelectionOracle
 from mikasa_oracles.rollout import Rollout, rollout
-from mikasa_oracles.selection import SelectionOracle
 
 __version__ = "0.1.0"
 
 # Task family (manifest) -> oracle class.
-ORACLES: dict[str, type] = {
-    family: SelectionOracle
-    for family in (
-        "remember_color",
-        "remember_shape",
-        "remember_shape_and_color",
-        "find_imposter_color",
-        "find_imposter_shape",
-        "find_imposter_shape_and_color",
-    )
-}
+ORACLES: dict[str, type] = ALL_ORACLES
 
 
 def has_oracle(env_id: str) -> bool:
@@ -30,7 +23,7 @@ def has_oracle(env_id: str) -> bool:
     return get_task(env_id).family in ORACLES
 
 
-def make_oracle(env: gym.Env, **kwargs) -> SelectionOracle:
+def make_oracle(env: gym.Env, **kwargs) -> Any:
     """The oracle for the task of ``env`` (made with ``gym.make``), wrapped or not."""
     from mikasa_envs.manifest import get_task
 

@@ -83,3 +83,16 @@ class SelectionOracle:
         goal[2] += TOUCH_HEIGHT + min(APPROACH_SLOPE * horizontal, APPROACH_MAX_LIFT)
         tilt = float(np.clip(TILT_PER_M * (goal[0] - TILT_FROM_X), 0.0, MAX_TILT))
         return move_towards(tcp_pose, goal, tilted(self.start_orientation, tilt), self.gain)
+
+
+ORACLES: dict[str, type] = {
+    family: SelectionOracle
+    for family in (
+        "remember_color",
+        "remember_shape",
+        "remember_shape_and_color",
+        "find_imposter_color",
+        "find_imposter_shape",
+        "find_imposter_shape_and_color",
+    )
+}
