@@ -274,6 +274,9 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         if len(idx) == 0:
             return
         poses = self._layouts[layout[idx], idx]
+        # The GPU body buffer is fetched after _after_control_step: refresh it first, or
+        # applying it would rewind every free body by this step's physics.
+        self.scene.px.gpu_fetch_rigid_dynamic_data()
         # GPU: ManiSkill writes only the rows of envs flagged in the scene's reset mask.
         saved_mask = self.scene._reset_mask.clone()
         self.scene._reset_mask[:] = False
