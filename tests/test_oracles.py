@@ -67,10 +67,18 @@ def test_oracle_learns_answer_from_the_cue(make_env):
     assert not bool(info["success"][0])
 
 
-def test_no_oracle_for_unknown_family(make_env):
+def test_no_oracle_for_unknown_family(make_env, monkeypatch):
+    import dataclasses
+
+    import mikasa_envs.manifest as manifest
+
     env = make_env("RememberColor3-VLA-v0")
-    env.spec.id = "ShellGamePick-VLA-v0"
-    with pytest.raises(ValueError, match="no oracle for 'ShellGamePick-VLA-v0'"):
+    real_get_task = manifest.get_task
+    # Present the task as one of a family that has no oracle.
+    monkeypatch.setattr(
+        manifest, "get_task", lambda env_id: dataclasses.replace(real_get_task(env_id), family="family_without_oracle")
+    )
+    with pytest.raises(ValueError, match=r"no oracle for 'RememberColor3-VLA-v0' \(family 'family_without_oracle'\)"):
         make_oracle(env)
 
 

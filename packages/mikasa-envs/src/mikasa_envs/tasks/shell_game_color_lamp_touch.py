@@ -1,0 +1,24 @@
+"""ShellGameColorLampTouch: see which colour lies at each place, then touch the cup the lamp's colour names."""
+
+from __future__ import annotations
+
+from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv
+
+
+@register_task("ShellGameColorLampTouch-VLA-v0")
+class ShellGameColorLampTouchVLAEnv(ColorLampShellGameVLABaseEnv):
+    """**Task Description:** a red, a green and a blue ball lie on the table at three places
+    (always red Left, green Center, blue Right); then the balls disappear, three
+    upside-down mugs stand over the three places and a lamp behind them lights up in one of
+    the three colours. Touch the mug over the ball of the lamp's colour and hold still.
+
+    **Randomizations:** the lamp colour; the slot row's position (±0.1 m in x and y); the
+    cue length (1-5 steps); arm joint noise.
+
+    **Success Conditions:** in the action phase, the TCP is within 0.08 m of the answer
+    slot's centre and every arm joint moves slower than 0.2 rad/s. Success does not end the
+    episode.
+    """
+
+    LANGUAGE_INSTRUCTION = "Observe which color is under each cup, then touch the cup matching the lamp color."

@@ -1,0 +1,24 @@
+"""ShellGameTouch: see where the ball is, then touch the mug that hides it."""
+
+from __future__ import annotations
+
+from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._shell_game import HiddenBallShellGameVLABaseEnv, TouchMugMixin
+
+
+@register_task("ShellGameTouch-VLA-v0")
+class ShellGameTouchVLAEnv(TouchMugMixin, HiddenBallShellGameVLABaseEnv):
+    """**Task Description:** a red ball lies on the table at one of three places; then three
+    upside-down mugs appear over the three places and one of them hides the ball. Touch
+    that mug (TCP within 8 cm of its centre) and hold still, without moving any mug more
+    than 5 cm.
+
+    **Randomizations:** the ball's slot (Left / Center / Right); the slot row's position
+    (±0.1 m in x and y); the cue length (1-5 steps); arm joint noise.
+
+    **Success Conditions:** in the action phase, the TCP is within 0.08 m of the ball mug's
+    centre, every arm joint moves slower than 0.2 rad/s, and no mug is more than 0.05 m (xy)
+    from its slot. The episode terminates at the first success.
+    """
+
+    LANGUAGE_INSTRUCTION = "Observe which cup hides the ball, wait, then touch that cup."
