@@ -1,0 +1,208 @@
+"""Oracle for TraceShape and TraceShapeSeq (``oracles_motion_planning.md`` §8.2, §9.2).
+
+It reads privileged simulator state (poses, the lamp's bulbs) but not the shape answer:
+while the lamp glows red it records where the red cube is in every frame, exactly what a
+camera would show, and later retraces that recording. Meanwhile it hovers above the green
+cube. When the lamp turns green it grasps the green cube and, for each recorded shape (the
+recording split into 64-waypoint demonstrations), carries the cube over checkpoints 0, 5,
+…, 55 of the recording and back to its start. TraceShapeSeq then drops the cube and
+presses the submit button from its near side (the far side of distant buttons is out of
+reach for a top-down gripper).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from mikasa_envs.tasks._trace_shape import (
+    BULB_GREEN,
+    BULB_RED,
+    CHECKPOINT_STRIDE,
+    NUM_CHECKPOINTS,
+    NUM_WAYPOINTS,
+)
+from transforms3d.axangles import axangle2mat
+from transforms3d.quaternions import quat2mat
+
+from mikasa_oracles.controller import move_towards
+
+GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
+# Hidden objects are parked at z = 1000; anything below this height is in view.
+VISIBLE_BELOW_Z = 1.0
+# The TCP pointing straight down (w, x, y, z); its fingers close along world y, square to the cube.
+TOP_DOWN = quat2mat([0.0, 1.0, 0.0, 0.0])
+HOVER_Z = 0.15
+GRASP_Z = 0.02  # TCP height of the grasp: at the cube centre
+TRACE_Z = 0.05  # TCP height while carrying the cube
+GRASP_TOL, CLOSE_STEPS = 0.003, 5
+# A carried cube counts as on a checkpoint well inside the env's 3.5 cm radius.
+TRACE_TOL, TRACE_MAX_STEPS = 0.008, 20
+# The cube is lost when its centre is farther than this from the TCP.
+LOST_GRASP_DIST = 0.035
+MAX_REGRASPS = 3
+MAX_PASSES = 3
+# Submit: press this far short of the button centre, on the line from the robot base, with
+# the hand leaning this much towards the button: a top-down hand cannot bring the TCP beyond
+# ≈ 0.80 m from the base, where 3-5 % of the buttons' near sides lie (up to 0.815 m).
+ROBOT_BASE_XY = np.array([-0.615, 0.0])
+NEAR_SIDE_OFFSET = 0.055
+SUBMIT_TILT = 0.3
+PRESS_Z = 0.07
+DROP_STEPS = 3
+
+Action = np.ndarray
+
+
+class TraceShapeOracle:
+    """Scripted solver of TraceShape / TraceShapeSeq; one instance per env, ``num_envs == 1``."""
+
+    chunk_size = 1
+
+    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
+        self.env = env
+        self.base = env.unwrapped
+        self.gain = gain
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous demonstration and restart the script."""
+        self.recorded_path: list[np.ndarray] = []
+        self._script: Iterator[Action] = self._run()
+
+    # ------------------------------------------------------------ observing
+    def _tcp_pose(self) -> np.ndarray:
+        return self.base.agent.tcp.pose.raw_pose[0].cpu().numpy().astype(np.float64)
+
+    def _cube(self) -> np.ndarray:
+        return self.base.green_cube_position()[0].cpu().numpy().astype(np.float64)
+
+    def _lit_bulb(self) -> int | None:
+        """Index of the lamp bulb in view (on the lamp, not parked above it)."""
+        for k, bulb in enumerate(self.base.lamp.bulbs):
+            if float(bulb.pose.p[0, 2]) < VISIBLE_BELOW_Z:
+                return k
+        return None
+
+    def _record_demo_frame(self) -> None:
+        if self._lit_bulb() != BULB_RED:
+            return
+        red = self.base.red_cube.pose.p[0].cpu().numpy()
+        if red[2] < VISIBLE_BELOW_Z:
+            self.recorded_path.append(red[:2].astype(np.float64))
+
+    def demonstrated_checkpoints(self) -> list[np.ndarray]:
+        """Per recorded shape, its (12, 2) checkpoints: every 5th recorded position."""
+        path = np.asarray(self.recorded_path)
+        shapes = [path[i : i + NUM_WAYPOINTS] for i in range(0, len(path) - NUM_WAYPOINTS + 1, NUM_WAYPOINTS)]
+        return [shape[: CHECKPOINT_STRIDE * NUM_CHECKPOINTS : CHECKPOINT_STRIDE] for shape in shapes]
+
+    def forward(self, obs: Any) -> np.ndarray:
+        """The action for the current frame."""
+        self._record_demo_frame()
+        return next(self._script)
+
+    # ------------------------------------------------------------ the script
+    def _action(self, goal: np.ndarray, gripper: float, rotation: np.ndarray = TOP_DOWN) -> Action:
+        return move_towards(self._tcp_pose(), goal, rotation, self.gain, gripper)
+
+    def _move(
+        self,
+        goal: Callable[[], np.ndarray],
+        gripper: float,
+        tol: float,
+        max_steps: int,
+        rotation: np.ndarray = TOP_DOWN,
+    ) -> Iterator[Action]:
+        """Drive the TCP to ``goal()`` (re-read each step) until within ``tol`` or ``max_steps``."""
+        for _ in range(max_steps):
+            target = goal()
+            if np.linalg.norm(target - self._tcp_pose()[:3]) < tol:
+                return
+            yield self._action(target, gripper, rotation)
+
+    def _stay(self, gripper: float, steps: int) -> Iterator[Action]:
+        here = self._tcp_pose()[:3]
+        for _ in range(steps):
+            yield self._action(here, gripper)
+
+    def _run(self) -> Iterator[Action]:
+        # Demonstration: hover above the green cube, gripper open (recording runs in forward).
+        while self._lit_bulb() != BULB_GREEN:
+            cube = self._cube()
+            yield self._action(np.array([cube[0], cube[1], HOVER_Z]), GRIPPER_OPEN)
+        yield from self._grasp()
+        for element, checkpoints in enumerate(self.demonstrated_checkpoints()):
+            yield from self._trace(element, checkpoints)
+        if hasattr(self.base, "button"):
+            yield from self._submit()
+        while True:
+            yield self._action(self._tcp_pose()[:3], GRIPPER_CLOSED)
+
+    def _grasp(self) -> Iterator[Action]:
+        """Open above the cube, descend to its centre, close."""
+        def above() -> np.ndarray:
+            cube = self._cube()
+            return np.array([cube[0], cube[1], max(self._tcp_pose()[2], GRASP_Z + 0.06)])
+
+        yield from self._move(above, GRIPPER_OPEN, 0.01, 30)
+        yield from self._move(lambda: np.array([*self._cube()[:2], GRASP_Z]), GRIPPER_OPEN, GRASP_TOL, 30)
+        yield from self._stay(GRIPPER_CLOSED, CLOSE_STEPS)
+
+    def _grasp_lost(self) -> bool:
+        return bool(np.linalg.norm(self._cube() - self._tcp_pose()[:3]) > LOST_GRASP_DIST)
+
+    def _carry_to(self, target_xy: np.ndarray) -> Iterator[Action]:
+        """Move the TCP so that the carried cube's centre comes over ``target_xy``."""
+        for _ in range(TRACE_MAX_STEPS):
+            tcp, cube = self._tcp_pose(), self._cube()
+            if np.linalg.norm(target_xy - cube[:2]) < TRACE_TOL:
+                return
+            goal = np.array([*(target_xy + tcp[:2] - cube[:2]), TRACE_Z])
+            yield self._action(goal, GRIPPER_CLOSED)
+
+    def _trace(self, element: int, checkpoints: np.ndarray) -> Iterator[Action]:
+        """Carry the cube over every checkpoint and back to the first; re-grasp a dropped
+        cube; repeat the checkpoints the env has not latched, up to MAX_PASSES times."""
+        todo = list(range(NUM_CHECKPOINTS))
+        regrasps = 0
+        for _ in range(MAX_PASSES):
+            for index in [*todo, 0]:
+                if self._grasp_lost() and regrasps < MAX_REGRASPS:
+                    regrasps += 1
+                    yield from self._stay(GRIPPER_OPEN, 2)
+                    yield from self._grasp()
+                yield from self._carry_to(checkpoints[index])
+            if self._element_closed(element):
+                return
+            todo = self._unvisited(element) or [0]
+
+    def _element_closed(self, element: int) -> bool:
+        closed = getattr(self.base, "shape_closed", None)
+        if closed is None:  # TraceShape: closing the contour is success and ends the episode
+            return False
+        return bool(closed[0, element])
+
+    def _unvisited(self, element: int) -> list[int]:
+        visited = self.base.checkpoint_visited[0]
+        if visited.ndim == 2:
+            visited = visited[element]
+        return [int(k) for k in np.flatnonzero(~visited.cpu().numpy())]
+
+    def _submit(self) -> Iterator[Action]:
+        """Drop the cube, then press the button from its near side, leaning towards it."""
+        yield from self._stay(GRIPPER_OPEN, DROP_STEPS)
+        button = self.base.button_xy[0].cpu().numpy().astype(np.float64)
+        away = (button - ROBOT_BASE_XY) / np.linalg.norm(button - ROBOT_BASE_XY)
+        press_xy = button - NEAR_SIDE_OFFSET * away
+        # Turning about the horizontal axis square to `away` tips the fingers towards the button.
+        leaning = axangle2mat([-away[1], away[0], 0.0], -SUBMIT_TILT) @ TOP_DOWN
+        here = self._tcp_pose()[:2]
+        yield from self._move(lambda: np.array([*here, HOVER_Z]), GRIPPER_CLOSED, 0.02, 30)
+        yield from self._move(lambda: np.array([*press_xy, HOVER_Z]), GRIPPER_CLOSED, 0.01, 40, leaning)
+        yield from self._move(lambda: np.array([*press_xy, PRESS_Z]), GRIPPER_CLOSED, 0.005, 20, leaning)
+
+
+ORACLES: dict[str, type] = {"trace_shape": TraceShapeOracle, "trace_shape_seq": TraceShapeOracle}
