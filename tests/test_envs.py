@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 import torch
-from conftest import REGISTERED_IDS
+from conftest import CANONICAL_IDS, REGISTERED_IDS
 from mikasa_envs import get_task
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_wrappers import apply_mikasa_vla_wrappers
@@ -73,11 +73,13 @@ def test_state_mode_contract(make_env, env_id):
         assert "reaching_reward" in info["reward_dict"]
 
 
-@pytest.mark.parametrize("env_id", REGISTERED_IDS)
+@pytest.mark.parametrize("env_id", CANONICAL_IDS)
 def test_rgb_mode_through_canonical_wrappers(make_env, env_id):
     env = apply_mikasa_vla_wrappers(make_env(env_id, obs_mode="rgb", reward_mode="normalized_dense"))
     obs, info = env.reset(seed=3)
-    assert list(obs) == ["proprio", "rgb"]
+    # task_cue stays in the VLA observation for the families that set it (wrappers.md §2).
+    has_cue = env.unwrapped.task_cue is not None
+    assert list(obs) == ["proprio", "rgb", "task_cue"] if has_cue else ["proprio", "rgb"]
     assert obs["rgb"].shape == (1, 128, 128, 6) and obs["rgb"].dtype == torch.uint8
     assert obs["proprio"].shape == (1, 7) and obs["proprio"].dtype == torch.float32
     obs, reward, terminated, truncated, info = env.step(np.zeros(7, dtype=np.float32))
