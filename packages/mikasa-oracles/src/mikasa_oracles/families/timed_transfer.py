@@ -1,0 +1,85 @@
+"""Oracle for TimedTransfer (``oracles_motion_planning.md`` §6.2).
+
+The oracle watches the lamp as a camera would (which bulb stands at the lamp) and notes the
+step it first shows green; the delay D is the number in the instruction. It grasps the
+cube, hovers it above the red disc and descends so that the cube enters the "on red" zone
+at the centre of the window, signal + D; success ends the episode there.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from mikasa_oracles.waypoints import GRIPPER_CLOSED, Waypoint, WaypointFollower, shown_bulb
+
+
+class TimedTransferOracle:
+    """Scripted solver of TimedTransfer; one instance per env, ``num_envs == 1``."""
+
+    chunk_size = 1
+    # TCP heights: above the cube before descending, carrying, hovering over the red disc
+    # (cube centre ≈ 0.10, clear of the 0.066 "on red" limit) and the placement target.
+    APPROACH_Z = 0.12
+    CARRY_Z = 0.14
+    HOVER_Z = 0.10
+    PLACE_Z = 0.03
+    CLOSE_STEPS = 5
+    # The descent from HOVER_Z takes this many steps to bring the cube below 0.066.
+    DESCENT_STEPS = 2
+
+    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
+        self.env = env
+        self.base = env.unwrapped
+        self.follower = WaypointFollower(gain)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous episode."""
+        self.follower.reset()
+        self.signal_seen_at: int | None = None
+        self.planned = False
+
+    def _release_step(self) -> int | None:
+        if self.signal_seen_at is None:
+            return None
+        # D is the number in the instruction; aim at the window's centre, signal + D.
+        return self.signal_seen_at + int(self.base.DELAY_STEPS) - self.DESCENT_STEPS
+
+    def _plan(self) -> None:
+        base = self.base
+        cube = base.cube_position()[0].cpu().numpy().astype(np.float64)
+        red = base.red_disc_center[0].cpu().numpy().astype(np.float64)
+        above_cube = np.array([cube[0], cube[1], self.APPROACH_Z])
+        at_cube = cube.copy()
+
+        def time_to_descend() -> bool:
+            release = self._release_step()
+            return release is not None and int(base.elapsed_steps[0]) >= release
+
+        self.follower.add(
+            Waypoint(above_cube, 1.0, tol=0.01, max_steps=40),
+            Waypoint(at_cube, 1.0, tol=0.004, max_steps=30),
+            Waypoint(at_cube, GRIPPER_CLOSED, tol=1.0, min_steps=self.CLOSE_STEPS),
+            Waypoint(np.array([cube[0], cube[1], self.CARRY_Z]), GRIPPER_CLOSED, tol=0.02, max_steps=30),
+            Waypoint(np.array([red[0], red[1], self.CARRY_Z]), GRIPPER_CLOSED, tol=0.01, max_steps=40),
+            # Hover until two steps before signal + D (no step cap: the wait may be 1000 steps).
+            Waypoint(np.array([red[0], red[1], self.HOVER_Z]), GRIPPER_CLOSED, tol=1.0, max_steps=10**9, until=time_to_descend),
+            Waypoint(np.array([red[0], red[1], self.PLACE_Z]), GRIPPER_CLOSED, tol=0.0, max_steps=10**9),
+        )
+
+    def forward(self, obs: Any) -> np.ndarray:
+        """The action for the current frame."""
+        base = self.base
+        if self.signal_seen_at is None and shown_bulb(base.lamp) == "green":
+            self.signal_seen_at = int(base.elapsed_steps[0])
+        if not self.planned:
+            self._plan()
+            self.planned = True
+        tcp_pose = base.agent.tcp.pose.raw_pose[0].cpu().numpy().astype(np.float64)
+        return self.follower.action(tcp_pose)
+
+
+ORACLES: dict[str, type] = {"timed_transfer": TimedTransferOracle}
