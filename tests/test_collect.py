@@ -290,7 +290,6 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
     "argv, fragment",
     [
         (["--env-id", "RememberColour3-VLA-v0"], "Did you mean: RememberColor3-VLA-v0"),
-        (["--env-id", "ShellGameTouch-VLA-v0"], "no oracle for 'ShellGameTouch-VLA-v0'"),
         (["--env-id", ENV_ID, "--num-episodes", "0"], "must be >= 1"),
         (["--env-id", ENV_ID, "--num-episodes", "-3"], "must be >= 1"),
         (["--env-id", ENV_ID, "--workers", "0"], "must be >= 1"),
@@ -307,6 +306,17 @@ def test_bad_input_exits_2(tmp_path, capsys, argv, fragment):
             status = exc.code
     assert status == 2
     assert fragment in capsys.readouterr().err
+    assert not (tmp_path / "data").exists()
+
+
+def test_family_without_oracle_exits_2(tmp_path, capsys, monkeypatch):
+    import mikasa_oracles
+
+    monkeypatch.delitem(mikasa_oracles.ORACLES, "shell_game_touch")
+    with chdir(tmp_path):
+        status = main(["--env-id", "ShellGameTouch-VLA-v0", "--out", "data", "--no-progress"])
+    assert status == 2
+    assert "no oracle for 'ShellGameTouch-VLA-v0'" in capsys.readouterr().err
     assert not (tmp_path / "data").exists()
 
 
