@@ -26,7 +26,12 @@ SELECTION_FAMILIES = {
 
 
 def _matches_instruction(instruction: str, env_id: str) -> bool:
-    """The instruction equals the manifest's, whose ``{field}`` placeholders match any value."""
+    """The instruction equals the manifest's, whose ``{field}`` placeholders match any value.
+
+    Rotate gives a list, one string per env (rotate_lenient.md); each must match.
+    """
+    if isinstance(instruction, list):
+        return bool(instruction) and all(_matches_instruction(i, env_id) for i in instruction)
     template = get_task(env_id).language_instruction
     pattern = "".join(".+" if part.startswith("{") else re.escape(part) for part in re.split(r"(\{\w+\})", template))
     return isinstance(instruction, str) and re.fullmatch(pattern, instruction) is not None
