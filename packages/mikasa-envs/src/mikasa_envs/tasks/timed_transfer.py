@@ -74,10 +74,10 @@ class TimedTransferVLABaseEnv(LampTaskVLABaseEnv):
     blue_cube: Actor
     lamp: ColorSwitchLamp
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        # One instruction per variant: the template with this variant's delay.
-        self.LANGUAGE_INSTRUCTION = self.LANGUAGE_INSTRUCTION_TEMPLATE.format(D=self.DELAY_STEPS)
-        super().__init__(*args, **kwargs)
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        # One instruction per variant: the template with this variant's delay (the manifest's).
+        super().__init_subclass__(**kwargs)
+        cls.LANGUAGE_INSTRUCTION = cls.LANGUAGE_INSTRUCTION_TEMPLATE.format(D=cls.DELAY_STEPS)
 
     @property
     def disc_top_z(self) -> float:
