@@ -33,9 +33,9 @@ from mikasa_envs.building_blocks.buttons import (
     PressLatch,
 )
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
+from mikasa_envs.building_blocks.layouts import jitter_sequential
 from mikasa_envs.building_blocks.object_sets import palette_cubes
 from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, IDENTITY_QUAT
-from mikasa_envs.tasks._selection import jitter_sequential
 
 NUM_COLORS = 9
 # Frames after the last pinned one leave the cubes free (layout id).

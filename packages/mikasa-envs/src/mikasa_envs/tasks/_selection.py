@@ -25,6 +25,7 @@ from mani_skill.utils.structs import Actor, Pose
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import COLOR_PALETTE_RGB, CUBE_HALF_SIZE, rgba01
+from mikasa_envs.building_blocks.layouts import jitter_sequential
 from mikasa_envs.building_blocks.object_sets import (
     ObjectSet,
     blue_shapes,
@@ -57,20 +58,6 @@ def arc_slots(n: int, radius: float = 0.3, even_offset: bool = False, y_shift: f
 def line_slots_3() -> np.ndarray:
     """The three slots of the N = 3 colour/shape tasks: (0, +0.1), (0, 0), (0, −0.1)."""
     return np.array([[0.0, 0.1], [0.0, 0.0], [0.0, -0.1]])
-
-
-def jitter_sequential(
-    slots: torch.Tensor, sigma: float = 0.01, min_dist: float = 0.06, tries: int = 50
-) -> torch.Tensor:
-    """Jitter slots in order; each keeps the first try ≥ ``min_dist`` from earlier ones."""
-    out = slots.clone()
-    for i in range(len(out)):
-        for _ in range(tries):
-            candidate = slots[i] + torch.randn(2) * sigma
-            if i == 0 or torch.linalg.norm(out[:i] - candidate, dim=1).min() >= min_dist:
-                out[i] = candidate
-                break
-    return out
 
 
 _ZERO3 = np.zeros(3, dtype=np.float32)
