@@ -39,8 +39,9 @@ import numpy as np
 
 
 def _cpu() -> float:
+    """CPU seconds of this process and its finished children (parallel LeRobot writers)."""
     t = os.times()
-    return t.user + t.system
+    return t.user + t.system + t.children_user + t.children_system
 
 
 def _timed(label: str, fn, frames_hint: int | None = None) -> dict:
@@ -70,6 +71,8 @@ def _timed(label: str, fn, frames_hint: int | None = None) -> dict:
 
 REPO = Path(__file__).resolve().parent.parent
 SIM_PYTHON = REPO / ".venv" / "bin" / "python"
+"""The simulator's interpreter (``--sim-python`` replaces it, e.g. on a machine whose
+own Python has the packages)."""
 
 
 def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
@@ -89,7 +92,7 @@ def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
     print("COLLECT " + json.dumps(row), flush=True)
 
 
-def family_representatives() -> tuple[dict[str, str], list[str]]:
+def family_representatives(sim_python: Path) -> tuple[dict[str, str], list[str]]:
     """(family -> its shortest-horizon registered canonical task, families without envs),
     read from the manifest in the simulator's environment."""
     code = (
@@ -99,7 +102,9 @@ def family_representatives() -> tuple[dict[str, str], list[str]]:
         "rows = [(t.family, t.max_episode_steps, t.env_id, t.env_id in reg) for t in list_tasks()]\n"
         "print('FAMILIES ' + json.dumps(rows))\n"
     )
-    out = subprocess.run([str(SIM_PYTHON), "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [str(sim_python), "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     rows = json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
     chosen: dict[str, tuple[int, str]] = {}
     for family, horizon, env_id, registered in rows:
@@ -115,10 +120,11 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
     episodes = args.collect_episodes
     workers = [int(w) for w in args.collect_workers.split(",")]
     only = set(args.collect_families.split(",")) if args.collect_families else None
-    if not SIM_PYTHON.is_file():
-        print(f"collection: skipped, no simulator environment at {SIM_PYTHON} (scripts/setup.sh)")
+    sim_python = Path(args.sim_python)
+    if not sim_python.is_file():
+        print(f"collection: skipped, no simulator environment at {sim_python} (scripts/setup.sh)")
         return []
-    reps, missing = family_representatives()
+    reps, missing = family_representatives(sim_python)
     if only:
         reps = {f: e for f, e in reps.items() if f in only}
     print(f"collection: {episodes} episodes per run; families without envs yet: {len(missing)}")
@@ -127,7 +133,15 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
         for w in workers:
             out = work / f"collect_{family}_{w}"
             proc = subprocess.run(
-                [str(SIM_PYTHON), __file__, "--_collect-child", env_id, str(episodes), str(w), str(out)],
+                [
+                    str(sim_python),
+                    __file__,
+                    "--_collect-child",
+                    env_id,
+                    str(episodes),
+                    str(w),
+                    str(out),
+                ],
                 capture_output=True,
                 text=True,
             )
@@ -170,11 +184,23 @@ def main(argv: list[str] | None = None) -> int:
         default="npz-rlds,rlds-lerobot,npz-lerobot",
         help="comma-separated subset to run, of npz-rlds, rlds-lerobot, npz-lerobot, collect",
     )
-    parser.add_argument("--collect-episodes", type=int, default=8, help="episodes per collection run")
+    parser.add_argument(
+        "--collect-episodes", type=int, default=8, help="episodes per collection run"
+    )
     parser.add_argument("--collect-workers", default="1,2", help="worker counts to collect with")
-    parser.add_argument("--collect-families", help="comma-separated families (default: all with envs)")
+    parser.add_argument(
+        "--collect-families", help="comma-separated families (default: all with envs)"
+    )
+    parser.add_argument(
+        "--sim-python",
+        default=str(SIM_PYTHON),
+        help="the simulator's Python (default: %(default)s)",
+    )
     parser.add_argument("--_collect-child", nargs=4, help=argparse.SUPPRESS)
-    parser.add_argument("--vcodec", default="libsvtav1")
+    parser.add_argument("--vcodec", default="h264")
+    parser.add_argument(
+        "--workers", type=int, help="LeRobot writer processes (default: the converter's)"
+    )
     parser.add_argument("--json", type=Path, help="also write the rows as JSON here")
     parser.add_argument(
         "--keep", type=Path, help="work directory to keep (default: a deleted temp dir)"
@@ -246,7 +272,11 @@ def main(argv: list[str] | None = None) -> int:
                 _timed(
                     "rlds->lerobot",
                     lambda: lr.convert_rlds_to_lerobot(
-                        rlds_dir, work / "lerobot_from_rlds", overwrite=True, vcodec=args.vcodec
+                        rlds_dir,
+                        work / "lerobot_from_rlds",
+                        overwrite=True,
+                        vcodec=args.vcodec,
+                        workers=args.workers,
                     ),
                 )
             )
@@ -255,7 +285,11 @@ def main(argv: list[str] | None = None) -> int:
                 _timed(
                     "npz->lerobot",
                     lambda: lr.convert_npz_to_lerobot(
-                        npz_task, work / "lerobot_from_npz", overwrite=True, vcodec=args.vcodec
+                        npz_task,
+                        work / "lerobot_from_npz",
+                        overwrite=True,
+                        vcodec=args.vcodec,
+                        workers=args.workers,
                     ),
                 )
             )

@@ -103,7 +103,18 @@ def build_parser() -> argparse.ArgumentParser:
         default="mikasa_robo",
         help="robot_type in meta/info.json (default: %(default)s)",
     )
-    p.add_argument("--vcodec", default="libsvtav1", help="video codec (default: %(default)s, AV1)")
+    p.add_argument(
+        "--vcodec",
+        default="h264",
+        help="video codec, one lerobot accepts: h264 (libx264, crf 23, ultrafast), libsvtav1 "
+        "(AV1, lerobot's default), hevc (default: %(default)s)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="writer processes (default: one per CPU, with >= 32 episodes each)",
+    )
     p.add_argument(
         "--no-videos", action="store_true", help="store camera frames as PNG images instead of MP4"
     )
@@ -205,6 +216,7 @@ def _run_to_lerobot(args: argparse.Namespace) -> int:
             robot_type=args.robot_type,
             use_videos=not args.no_videos,
             vcodec=args.vcodec,
+            workers=args.workers,
         )
         _report("to-lerobot", result.path.name, result)
     return 0

@@ -483,6 +483,15 @@ def convert_npz_to_rlds(
 
 
 # --------------------------------------------------------------------------- reading
+def _shard_lengths(version_dir: Path) -> list[int]:
+    """Episodes per shard of the train split, from dataset_info.json."""
+    info = json.loads((version_dir / "dataset_info.json").read_text(encoding="utf-8"))
+    for split in info.get("splits", []):
+        if split.get("name") == SPLIT:
+            return [int(n) for n in split.get("shardLengths", [])]
+    raise DatasetFormatError(version_dir / "dataset_info.json", f"has no {SPLIT!r} split")
+
+
 def _num_examples(info: dict[str, Any]) -> int:
     """Total number of examples of the ``train`` split in a dataset_info.json mapping."""
     for split in info.get("splits", []):
@@ -535,13 +544,15 @@ def shard_files(version_dir: str | os.PathLike[str]) -> list[Path]:
 
 
 def iter_examples(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str], start: int = 0, stop: int | None = None
 ) -> Iterator[tuple[Path, dict[str, Any], dict[str, Any]]]:
-    """``(shard, steps, episode_metadata)`` for every stored episode, numpy values.
+    """``(shard, steps, episode_metadata)`` for the stored episodes ``start`` to ``stop``
+    (default: all), in stored order, numpy values.
 
     ``steps`` holds stacked arrays (``steps["observation"]["image"]`` is (T,128,128,3)).
     Shards are read one by one so that a corrupt or truncated record raises
-    DatasetFormatError naming its shard file.
+    DatasetFormatError naming its shard file; shards wholly before ``start`` are not read
+    (dataset_info.json gives each shard's length).
     """
     tf = _tf()
     tfds = _tfds()
@@ -552,8 +563,21 @@ def iter_examples(
         raise DatasetFormatError(vdir / "features.json", f"cannot be loaded: {exc}") from exc
     steps_feature = features["steps"]
     meta_feature = features["episode_metadata"]
-    for shard in shard_files(vdir):
-        records = tf.data.TFRecordDataset([str(shard)])
+    if stop is not None and stop <= start:
+        return
+    shards = shard_files(vdir)
+    lengths = _shard_lengths(vdir)
+    first = 0  # stored index of the shard's first episode
+    for shard, length in zip(shards, lengths, strict=True):
+        if stop is not None and first >= stop:
+            return
+        if first + length <= start:
+            first += length
+            continue
+        skip = max(0, start - first)
+        take = length - skip if stop is None else min(length, stop - first) - skip
+        first += length
+        records = tf.data.TFRecordDataset([str(shard)]).skip(skip).take(take)
         it = iter(records)
         while True:
             try:
@@ -591,9 +615,12 @@ def _stack_steps(steps: list[dict[str, Any]], feature: Any) -> dict[str, Any]:
     return stack(steps)
 
 
-def iter_episodes(path: str | os.PathLike[str]) -> Iterator[dict[str, np.ndarray]]:
-    """Episodes of an RLDS task/version directory in the NPZ schema (exact round trip)."""
-    for _, steps, metadata in iter_examples(path):
+def iter_episodes(
+    path: str | os.PathLike[str], start: int = 0, stop: int | None = None
+) -> Iterator[dict[str, np.ndarray]]:
+    """Episodes ``start`` to ``stop`` (default: all) of an RLDS task/version directory in
+    the NPZ schema (exact round trip)."""
+    for _, steps, metadata in iter_examples(path, start, stop):
         yield episode_from_rlds(steps, {k: _meta_value(v) for k, v in metadata.items()})
 
 
