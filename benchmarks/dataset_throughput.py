@@ -18,9 +18,10 @@ it there); families without envs yet are listed as such::
 
     .venv-datasets/bin/python benchmarks/dataset_throughput.py --paths collect --collect-episodes 8
 
-Short runs are start-up bound (each worker imports the simulator and builds its env; with
-lavapipe the first build compiles shaders): 2 workers only pay off over longer runs
-(``--collect-episodes 40 --collect-families remember_color``).
+Short runs are start-up bound (with 2 workers, each worker process imports the simulator
+and builds its env, ~8 s; with lavapipe the first build compiles shaders): the rate
+"after start-up" (from the first finished attempt on) is printed beside the overall one,
+and 2 workers only pay off overall over longer runs (``--collect-episodes 40``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,16 @@ def _cpu() -> float:
     """CPU seconds of this process and its finished children (parallel LeRobot writers)."""
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
+
+
+def machine_speed() -> float:
+    """Seconds for a 10M-iteration Python loop: this shared machine's speed drifts (the
+    same conversion has run 2x apart hours apart); print it beside every figure."""
+    t0 = time.perf_counter()
+    total = 0
+    for i in range(10_000_000):
+        total += i
+    return round(time.perf_counter() - t0, 2)
 
 
 def _timed(label: str, fn, frames_hint: int | None = None) -> dict:
@@ -87,6 +98,8 @@ def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
         "frames": s.frames,
         "wall_s": round(s.wall_s, 2),
         "episodes_per_min": round(s.episodes_per_min, 1),
+        "startup_s": None if s.startup_s is None else round(s.startup_s, 2),
+        "steady_episodes_per_min": round(s.steady_episodes_per_min, 1),
         "success_rate": round(s.success_rate, 3),
     }
     print("COLLECT " + json.dumps(row), flush=True)
@@ -150,8 +163,9 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
                 raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
             row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
             print(
-                f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min "
-                f"({row['episodes']} ep, {row['frames']} frames, {row['wall_s']:.1f} s, success {row['success_rate']:.0%})",
+                f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min, "
+                f"{row['steady_episodes_per_min']:>6.1f} after start-up ({row['episodes']} ep, {row['frames']} frames, "
+                f"{row['wall_s']:.1f} s, start-up {row['startup_s']} s, success {row['success_rate']:.0%})",
                 flush=True,
             )
             rows.append(row)
@@ -256,8 +270,12 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng(0)
             lengths = [int(x) for x in rng.integers(args.min_len, args.max_len + 1, args.episodes)]
             npz_task = write_synthetic_task(work / "data_npz", "RememberColor3-VLA-v0", lengths)
-        print(f"source: {npz_task}  (cores: {os.cpu_count()}, vcodec: {args.vcodec})")
-        rows = []
+        speed = machine_speed()
+        print(
+            f"source: {npz_task}  (cores: {os.cpu_count()}, vcodec: {args.vcodec}, "
+            f"machine speed: 10M-iteration Python loop {speed} s)"
+        )
+        rows = [{"path": "machine", "cores": os.cpu_count(), "python_loop_10m_s": speed}]
         rlds_dir = None
         if paths & {"npz-rlds", "rlds-lerobot"}:
             rows.append(

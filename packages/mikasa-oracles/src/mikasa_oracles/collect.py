@@ -407,6 +407,8 @@ class CollectionSummary:
     workers: int = 1
     seeds: tuple[int, int] | None = None
     reasons: dict[str, int] = field(default_factory=dict)
+    startup_s: float | None = None
+    """Wall time until the first attempt finished: worker start-up, env build, one episode."""
 
     @property
     def success_rate(self) -> float:
@@ -417,6 +419,14 @@ class CollectionSummary:
     def episodes_per_min(self) -> float:
         """New episodes per minute of wall time of this run."""
         return 60.0 * self.new_episodes / self.wall_s if self.wall_s > 0 else float("nan")
+
+    @property
+    def steady_episodes_per_min(self) -> float:
+        """New episodes per minute after the first attempt finished (start-up excluded;
+        NaN with fewer than two new episodes)."""
+        if self.startup_s is None or self.new_episodes < 2 or self.wall_s <= self.startup_s:
+            return float("nan")
+        return 60.0 * (self.new_episodes - 1) / (self.wall_s - self.startup_s)
 
     def format(self) -> str:
         """Multi-line human-readable summary."""
@@ -624,6 +634,8 @@ def collect(
                 if not in_flight:
                     break  # budget spent
                 result = pool.get()
+                if summary.startup_s is None:
+                    summary.startup_s = time.perf_counter() - t0
                 in_flight.discard(result.seed)
                 if result.error is not None:
                     raise CollectionFailed(
