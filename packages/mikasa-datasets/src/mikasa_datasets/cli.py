@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=int,
         default=None,
-        help="writer processes (default: one per CPU, with >= 32 episodes each)",
+        help="writer processes (default: one per CPU, with >= 8 episodes each)",
     )
     p.add_argument(
         "--no-videos", action="store_true", help="store camera frames as PNG images instead of MP4"

@@ -323,9 +323,14 @@ def _patch_running_stats(stats_class: type) -> Callable[[], None]:
     @functools.wraps(original_update)
     def update(self: Any, batch: np.ndarray) -> None:
         batch = np.asarray(batch)
-        if batch.dtype != np.uint8 or batch.size == 0:
+        if batch.size == 0:
             return original_update(self, batch)
-        _update_from_value_counts(self, batch.reshape(-1, batch.shape[-1]))
+        if batch.dtype == np.uint8:
+            return _update_from_value_counts(self, batch.reshape(-1, batch.shape[-1]))
+        if self._count == 0:
+            _first_update(self, batch.reshape(-1, batch.shape[-1]))
+        else:
+            original_update(self, batch)
 
     def update_histograms(self: Any, batch: np.ndarray) -> None:
         for i in range(batch.shape[1]):
@@ -340,6 +345,21 @@ def _patch_running_stats(stats_class: type) -> Callable[[], None]:
             setattr(stats_class, name, value)
 
     return undo
+
+
+def _first_update(stats: Any, batch: np.ndarray) -> None:
+    """lerobot's first ``RunningQuantileStats.update`` (the only one for per-episode
+    statistics), with every channel's bin edges and histogram made in one array each
+    instead of one call per channel (``np.linspace`` along an axis gives the same values)."""
+    n, channels = batch.shape
+    bins = stats._num_quantile_bins
+    stats._min, stats._max = np.min(batch, axis=0), np.max(batch, axis=0)
+    stats._histograms = list(np.zeros((channels, bins)))
+    stats._bin_edges = list(np.linspace(stats._min - 1e-10, stats._max + 1e-10, bins + 1, axis=1))
+    stats._count = n
+    stats._mean = np.mean(batch, axis=0)
+    stats._mean_of_squares = np.mean(batch**2, axis=0)
+    stats._update_histograms(batch)
 
 
 def _histogram_counts(values: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -729,10 +749,9 @@ def _prefetch(items: Iterator[Any], depth: int = 3) -> Iterator[Any]:
         thread.join(timeout=5)
 
 
-EPISODES_PER_WORKER = 32
+EPISODES_PER_WORKER = 8
 """Default writer processes: one per core, each with at least this many episodes (a
-parallel write ends with lerobot's aggregation, ~1 s, which a smaller share would not
-win back)."""
+parallel write ends with lerobot's aggregation and one video join, ~0.5-1 s here)."""
 
 
 def writer_count(workers: int | None, num_episodes: int) -> int:
@@ -756,12 +775,7 @@ def _part_writer(conn: Any, root: Path, repo_id: str, write_kwargs: dict[str, An
 
     try:
         written = write_lerobot(
-            received(),
-            root,
-            repo_id,
-            progress=lambda n: conn.send(("episode", n)),
-            join_videos=False,  # joined once, after aggregation
-            **write_kwargs,
+            received(), root, repo_id, progress=lambda n: conn.send(("episode", n)), **write_kwargs
         )
         conn.send(("done", written))
     except BaseException as exc:  # reported to the parent, which raises it
@@ -782,8 +796,8 @@ def _write_in_parts(
 ) -> tuple[int, int]:
     """Write episodes ``0..num_episodes`` with ``workers`` writer processes, each making a
     LeRobot dataset of a contiguous share, then join the shares into one at ``root`` with
-    lerobot's ``aggregate_datasets`` (episode order kept; video files are joined without
-    re-encoding, statistics combined by lerobot). This process reads the episodes, one
+    lerobot's ``aggregate_datasets`` (episode order kept; each share's video files kept
+    as they are, statistics combined by lerobot). This process reads the episodes, one
     thread per share, and hands them to the writers through pipes.
 
     Writers are forked: they start at once with lerobot already imported, and touch
@@ -862,7 +876,6 @@ def _write_in_parts(
         if read_errors:
             raise read_errors[0]
         _aggregate(parts, [f"{repo_id}-part{i}" for i in range(workers)], root, repo_id)
-        join_episode_videos(root, VIDEO_FILE_SIZE_IN_MB)
         return sum(r[0] for r in results.values()), sum(r[1] for r in results.values())
     finally:
         for writer in writers:
@@ -877,10 +890,11 @@ def _write_in_parts(
 
 def _aggregate(parts: list[Path], part_ids: list[str], root: Path, repo_id: str) -> None:
     """lerobot's ``aggregate_datasets`` of ``parts`` into a new dataset at ``root``,
-    without its progress bars. Video files are copied, one per episode as the writers left
-    them (aggregation is told a file size no two files fit in: joining them one by one
-    would re-mux the growing file each time); the caller joins them in one pass. Frame
-    tables are joined as lerobot does (their indices change)."""
+    without its progress bars. Each part's video files (joined by its writer) are copied
+    as they are: aggregation is told a file size no two files fit in (joining them would
+    re-mux them once more); ``video_files_size_in_mb`` in meta/info.json is set back to
+    `VIDEO_FILE_SIZE_IN_MB` afterwards. Frame tables are joined as lerobot does (their
+    indices change)."""
     from lerobot.datasets import aggregate
 
     original_tqdm = aggregate.tqdm.tqdm
@@ -897,6 +911,11 @@ def _aggregate(parts: list[Path], part_ids: list[str], root: Path, repo_id: str)
     finally:
         aggregate.tqdm.tqdm = original_tqdm
         loud_libav()
+    from lerobot.datasets.utils import write_info
+
+    info = read_info(root)
+    info["video_files_size_in_mb"] = VIDEO_FILE_SIZE_IN_MB
+    write_info(info, root)
 
 
 def _convert(
