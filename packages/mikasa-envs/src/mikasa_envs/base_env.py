@@ -255,16 +255,18 @@ class MikasaVLABaseEnv(BaseEnv):
             return super().reset(seed=seed, options=options)
 
     def step(self, action: Any):
-        """ManiSkill's step with input checks; episodes end only by truncation."""
+        """ManiSkill's step with input checks; ``terminated`` is the family's `_terminated`."""
         self._check_action(action)
         obs, reward, _, truncated, info = super().step(action)
-        # Upstream returns terminated & ~success: success never ends an episode, and no
-        # selection task defines a failure, so only a family's "fail" can terminate.
+        return obs, reward, self._terminated(info), truncated, info
+
+    def _terminated(self, info: dict) -> torch.Tensor:
+        """Per env, whether the episode ends at this step. Default, as upstream (which
+        returns terminated & ~success): success never ends an episode, and no selection
+        task defines a failure, so only a family's "fail" can; families override this."""
         if "fail" in info:
-            terminated = info["fail"] & ~info["success"]
-        else:
-            terminated = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        return obs, reward, terminated, truncated, info
+            return info["fail"] & ~info["success"]
+        return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
 
     def _check_action(self, action: Any) -> None:
         if action is None or isinstance(action, dict):

@@ -562,10 +562,9 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
             obj_to_goal_pos=self.socket_slot_pos - tcp,
         )
 
-    def step(self, action: Any):
-        """The base step; success ends the episode (``terminated`` = success, as upstream)."""
-        obs, reward, terminated, truncated, info = super().step(action)
-        return obs, reward, terminated | info["success"], truncated, info
+    def _terminated(self, info: dict) -> torch.Tensor:
+        """Success ends the episode too (``terminated`` = success, as upstream)."""
+        return super()._terminated(info) | info["success"]
 
     def _get_obs_extra(self, info: dict) -> dict:
         obs = dict(tcp_pose=self.agent.tcp.pose.raw_pose)

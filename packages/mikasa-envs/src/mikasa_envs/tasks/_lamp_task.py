@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -46,10 +46,9 @@ class LampTaskVLABaseEnv(MikasaVLABaseEnv):
         self.cue_steps_per_env[env_idx] = 0
         self.empty_steps_per_env[env_idx] = 0
 
-    def step(self, action: Any):
-        """The base step; the episode terminates on success or failure."""
-        obs, reward, _, truncated, info = super().step(action)
-        return obs, reward, info["success"] | info["failed"], truncated, info
+    def _terminated(self, info: dict) -> torch.Tensor:
+        """The episode ends on success or failure."""
+        return info["success"] | info["failed"]
 
     def _visual_state(self) -> list[torch.Tensor]:
         """Per-env state of the visual-only pieces rewritten in ``evaluate`` (lamp bulbs, caps)."""

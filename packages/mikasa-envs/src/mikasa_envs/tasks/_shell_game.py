@@ -177,12 +177,11 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
         if self._apply_frame(self.elapsed_steps + 1, None, after_physics=True) and self.gpu_sim_enabled:
             self.scene.px.gpu_apply_rigid_dynamic_data()
 
-    def step(self, action: Any):
-        """The base step; Touch / Push / Pick terminate on success (their reference has no override)."""
-        obs, reward, terminated, truncated, info = super().step(action)
+    def _terminated(self, info: dict) -> torch.Tensor:
+        """Touch / Push / Pick end on success (their reference has no override)."""
         if self.TERMINATE_ON_SUCCESS:
-            terminated = info["success"].clone()
-        return obs, reward, terminated, truncated, info
+            return info["success"].clone()
+        return super()._terminated(info)
 
     # --------------------------------------------------------------- writes
     def _write_poses(

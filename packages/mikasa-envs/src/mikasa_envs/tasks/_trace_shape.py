@@ -19,7 +19,7 @@ off its spot when a large square sweeps through it.
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import sapien
@@ -349,11 +349,6 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         )
 
     # -------------------------------------------------------------- stepping
-    def step(self, action: Any):
-        """The base step; ``terminated`` follows the family's rule (``_terminated``)."""
-        obs, reward, _, truncated, info = super().step(action)
-        return obs, reward, self._terminated(info), truncated, info
-
     def _terminated(self, info: dict) -> torch.Tensor:
         """Per env, whether the episode ends at this step."""
         raise NotImplementedError

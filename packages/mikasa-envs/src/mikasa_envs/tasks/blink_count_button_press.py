@@ -274,10 +274,9 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         return self.BUTTON_TOP_Z
 
     # ------------------------------------------------------------- stepping
-    def step(self, action: Any):
-        """The base step; an episode terminates on success or failure."""
-        obs, reward, _, truncated, info = super().step(action)
-        return obs, reward, info["success"] | info["failed"], truncated, info
+    def _terminated(self, info: dict) -> torch.Tensor:
+        """An episode ends on success or failure."""
+        return info["success"] | info["failed"]
 
     def _advance(self, tcp: torch.Tensor, depth: torch.Tensor, confirm_depth: torch.Tensor) -> None:
         """Advance the press / submit state of the envs whose frame moved on (spec §5).
