@@ -41,11 +41,11 @@ from mikasa_envs.building_blocks.poses import (
     HIDE_OFFSET_Z,
     UPRIGHT_CYLINDER_QUAT,
     write_actor_poses,
+    zero_actor_velocities,
 )
 
 # +90° about z: the tray, socket, lamp and button are all turned by it.
 YAW_90_QUAT = (float(np.cos(np.pi / 4)), 0.0, 0.0, float(np.sin(np.pi / 4)))
-_ZERO3 = np.zeros(3, dtype=np.float32)
 # ManiSkill's Panda grasp test: at least this force on each finger, within this angle of its
 # opening direction. Batteries farther than the radius from the TCP cannot touch both fingers.
 GRASP_MIN_FORCE = 0.5
@@ -302,23 +302,7 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
         positions[:, self.ACTIVE_BATTERIES :, 2] = HIDE_OFFSET_Z
         quat = torch.tensor(self.BATTERY_QUAT, device=dev).expand(b, self.MAX_BATTERIES, 4)
         write_actor_poses(self.scene, self.batteries, env_idx, torch.cat([positions, quat], dim=-1))
-        self._zero_battery_velocities(env_idx, range(self.ACTIVE_BATTERIES))
-
-    def _zero_battery_velocities(self, env_idx: torch.Tensor, battery_indices) -> None:
-        if not self.gpu_sim_enabled:
-            for k in battery_indices:
-                body = self.batteries[k]._bodies[0]
-                body.linear_velocity = _ZERO3
-                body.angular_velocity = _ZERO3
-            return
-        saved_mask = self.scene._reset_mask.clone()
-        self.scene._reset_mask[:] = False
-        self.scene._reset_mask[env_idx] = True
-        zeros = torch.zeros(len(env_idx), 3, device=self.device)
-        for k in battery_indices:
-            self.batteries[k].set_linear_velocity(zeros)
-            self.batteries[k].set_angular_velocity(zeros)
-        self.scene._reset_mask[:] = saved_mask
+        zero_actor_velocities(self.scene, self.batteries[: self.ACTIVE_BATTERIES], env_idx)
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         self.checked_mask[env_idx] = False
@@ -408,7 +392,7 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
             envs = env_idx[rows]
             poses = torch.cat([positions[rows], quat.expand(len(envs), 4)], dim=-1)
             write_actor_poses(self.scene, [self.batteries[k]], envs, poses[:, None])
-            self._zero_battery_velocities(envs, [k])
+            zero_actor_velocities(self.scene, [self.batteries[k]], envs)
 
     def _update_stage_machine(self, pos: torch.Tensor, tcp: torch.Tensor) -> torch.Tensor:
         """One step of §4 (socket, afterglow, insert, lamp, button, return, confirm) for TCP

@@ -19,9 +19,8 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-import sapien
 import torch
-from mani_skill.utils.structs import Actor, Pose
+from mani_skill.utils.structs import Actor
 from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
@@ -35,12 +34,16 @@ from mikasa_envs.building_blocks.buttons import (
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
 from mikasa_envs.building_blocks.layouts import jitter_sequential
 from mikasa_envs.building_blocks.object_sets import palette_cubes
-from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, IDENTITY_QUAT
+from mikasa_envs.building_blocks.poses import (
+    HIDE_OFFSET_Z,
+    IDENTITY_QUAT,
+    set_cpu_actor_pose,
+    write_actor_poses,
+)
 
 NUM_COLORS = 9
 # Frames after the last pinned one leave the cubes free (layout id).
 LAYOUT_FREE = -1
-_ZERO3 = np.zeros(3, dtype=np.float32)
 
 
 def layout_arc_xy(num_colors: int = NUM_COLORS) -> np.ndarray:
@@ -267,10 +270,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
                 self._cubes_free_from = frame
                 return
             for actor, row in zip(self.cube_actors, self._layouts_np[which], strict=True):
-                actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
-                body = actor._bodies[0]
-                body.linear_velocity = _ZERO3
-                body.angular_velocity = _ZERO3
+                set_cpu_actor_pose(actor, row, zero_velocity=True)
             return
         ids = self.frame_layout_ids(t)
         if env_mask is not None:
@@ -283,16 +283,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
             # Applying writes the whole buffer back to PhysX: refresh it first, or every free
             # body of the other envs would be rewound by this step's physics.
             self.scene.px.gpu_fetch_rigid_dynamic_data()
-        # GPU: ManiSkill writes only the rows flagged in the scene's reset mask.
-        saved_mask = self.scene._reset_mask.clone()
-        self.scene._reset_mask[:] = False
-        self.scene._reset_mask[idx] = True
-        zeros = torch.zeros(len(idx), 3, device=self.device)
-        for k, actor in enumerate(self.cube_actors):
-            actor.set_pose(Pose.create(poses[:, k]))
-            actor.set_linear_velocity(zeros)
-            actor.set_angular_velocity(zeros)
-        self.scene._reset_mask[:] = saved_mask
+        write_actor_poses(self.scene, self.cube_actors, idx, poses, zero_velocity=True)
         self.scene.px.gpu_apply_rigid_dynamic_data()
 
     def _before_control_step(self) -> None:

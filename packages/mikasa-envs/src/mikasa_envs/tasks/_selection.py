@@ -19,9 +19,8 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
-import sapien
 import torch
-from mani_skill.utils.structs import Actor, Pose
+from mani_skill.utils.structs import Actor
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import COLOR_PALETTE_RGB, CUBE_HALF_SIZE, rgba01
@@ -32,6 +31,7 @@ from mikasa_envs.building_blocks.object_sets import (
     palette_cubes,
     shape_color_objects,
 )
+from mikasa_envs.building_blocks.poses import set_cpu_actor_pose, write_actor_poses
 from mikasa_envs.building_blocks.shapes import SHAPE_AND_COLOR_SHAPES, SHAPE_SCALE
 
 HIDDEN_Z = 1000.0
@@ -60,7 +60,6 @@ def line_slots_3() -> np.ndarray:
     return np.array([[0.0, 0.1], [0.0, 0.0], [0.0, -0.1]])
 
 
-_ZERO3 = np.zeros(3, dtype=np.float32)
 
 
 def _min_pairwise_distance(xy: torch.Tensor) -> torch.Tensor:
@@ -252,28 +251,15 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
                 self._free_from_step = int(t[0])
                 return
             for actor, row in zip(self.task_objects, self._layouts_np[which], strict=True):
-                actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
-                body = actor._bodies[0]
-                body.linear_velocity = _ZERO3
-                body.angular_velocity = _ZERO3
+                set_cpu_actor_pose(actor, row, zero_velocity=True)
             return
         idx = torch.nonzero(layout != LAYOUT_FREE).flatten()
         if len(idx) == 0:
             return
-        poses = self._layouts[layout[idx], idx]
         # The GPU body buffer is fetched after _after_control_step: refresh it first, or
         # applying it would rewind every free body by this step's physics.
         self.scene.px.gpu_fetch_rigid_dynamic_data()
-        # GPU: ManiSkill writes only the rows of envs flagged in the scene's reset mask.
-        saved_mask = self.scene._reset_mask.clone()
-        self.scene._reset_mask[:] = False
-        self.scene._reset_mask[idx] = True
-        zeros = torch.zeros(len(idx), 3, device=self.device)
-        for k, actor in enumerate(self.task_objects):
-            actor.set_pose(Pose.create(poses[:, k]))
-            actor.set_linear_velocity(zeros)
-            actor.set_angular_velocity(zeros)
-        self.scene._reset_mask[:] = saved_mask
+        write_actor_poses(self.scene, self.task_objects, idx, self._layouts[layout[idx], idx], zero_velocity=True)
         self.scene.px.gpu_apply_rigid_dynamic_data()
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:

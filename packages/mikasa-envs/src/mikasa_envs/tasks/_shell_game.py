@@ -29,14 +29,14 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.utils.building import actors as actor_builders
-from mani_skill.utils.structs import Actor, Pose
+from mani_skill.utils.structs import Actor
 from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import rgba01
 from mikasa_envs.building_blocks.cups import build_mug, mug_rest_height
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
-from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z
+from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, write_actor_poses
 
 NUM_SLOTS = 3
 MUG_NAMES = ("mug_left", "mug_center", "mug_right")
@@ -53,7 +53,6 @@ def normalized_quat(wxyz: Sequence[float]) -> tuple[float, float, float, float]:
 MUG_QUAT_HANDLE_AWAY = normalized_quat((0.0, 1.0, 0.5, 0.0))
 # Upside down, handle toward world (−0.724, 0.690, 0), i.e. toward the robot (Pick).
 MUG_QUAT_HANDLE_TOWARD_ROBOT = normalized_quat((0.0, 1.0, 2.5, 0.0))
-_ZERO3 = np.zeros(3, dtype=np.float32)
 
 
 def build_ball(scene: Any, name: str, rgba255: Sequence[int], radius: float) -> Actor:
@@ -189,33 +188,13 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
     ) -> bool:
         """Set ``actors[k]``'s pose to ``poses[:, k]`` ((B, K, 7)) in the envs of ``env_mask``.
 
-        CPU sim (one env): the SAPIEN entities are set directly (ManiSkill's batched setters
-        cost ~10x more). GPU sim: only the masked rows are written; the caller applies them.
+        Through `write_actor_poses` (CPU: SAPIEN entities directly; GPU: only the masked rows,
+        which the caller applies). Returns whether any env was written.
         """
-        if not self.gpu_sim_enabled:
-            if not bool(env_mask[0]):
-                return False
-            rows = poses[0].detach().cpu().numpy().astype(np.float64)
-            for actor, row in zip(actors, rows, strict=True):
-                actor._objs[0].pose = sapien.Pose(row[:3], row[3:])
-                if zero_velocity:
-                    body = actor._bodies[0]
-                    body.linear_velocity = _ZERO3
-                    body.angular_velocity = _ZERO3
-            return True
         idx = torch.nonzero(env_mask).flatten()
         if len(idx) == 0:
             return False
-        saved_mask = self.scene._reset_mask.clone()
-        self.scene._reset_mask[:] = False
-        self.scene._reset_mask[idx] = True
-        zeros = torch.zeros(len(idx), 3, device=self.device)
-        for k, actor in enumerate(actors):
-            actor.set_pose(Pose.create(poses[idx, k]))
-            if zero_velocity:
-                actor.set_linear_velocity(zeros)
-                actor.set_angular_velocity(zeros)
-        self.scene._reset_mask[:] = saved_mask
+        write_actor_poses(self.scene, actors, idx, poses[idx], zero_velocity)
         return True
 
     def _mug_poses_from_positions(self, positions: torch.Tensor) -> torch.Tensor:
