@@ -35,6 +35,7 @@ PINS=(
   # but does not declare it on Python >= 3.9.
   "importlib-resources>=6"
   "isal==1.9.1"
+  "google-crc32c==1.9.0"
   "torch==2.13.0"
   "torchvision==0.28.0"
   "torchcodec==0.13.0"

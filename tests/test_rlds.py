@@ -136,6 +136,15 @@ else:
         # and via the task directory (latest version) too
         _assert_same_episode(source[2], load_episodes(converted.path.parent)[2], "task dir")
 
+    def test_tfrecord_reader_equals_tensorflows(converted: rlds.ConversionResult) -> None:
+        import tensorflow as tf
+
+        for shard in rlds.shard_files(converted.path):
+            ours = list(rlds.read_tfrecords(shard))
+            theirs = [r.numpy() for r in tf.data.TFRecordDataset([str(shard)])]
+            assert ours == theirs and len(ours) > 0
+            assert list(rlds.read_tfrecords(shard, skip=1, take=1)) == theirs[1:2]
+
     def test_png_encoder_is_lossless_standard_png() -> None:
         import tensorflow as tf
 

@@ -764,18 +764,25 @@ def writer_count(workers: int | None, num_episodes: int) -> int:
     return max(1, min(workers, num_episodes))
 
 
-def _part_writer(conn: Any, root: Path, repo_id: str, write_kwargs: dict[str, Any]) -> None:
-    """(Forked writer process) write the episodes that arrive on ``conn`` (until ``None``)
-    as one LeRobot dataset at ``root``; report ``("episode", n)`` after each and finally
-    ``("done", (episodes, frames))`` or ``("error", exception)``."""
-
-    def received() -> Iterator[dict[str, np.ndarray]]:
-        while (episode := conn.recv()) is not None:
-            yield episode
-
+def _part_writer(
+    conn: Any,
+    episodes: Callable[[int, int], Iterator[dict[str, np.ndarray]]],
+    start: int,
+    stop: int,
+    root: Path,
+    repo_id: str,
+    write_kwargs: dict[str, Any],
+) -> None:
+    """(Forked writer process) read episodes ``start`` to ``stop`` and write them as one
+    LeRobot dataset at ``root``; report ``("episode", n)`` on ``conn`` after each and
+    finally ``("done", (episodes, frames))`` or ``("error", exception)``."""
     try:
         written = write_lerobot(
-            received(), root, repo_id, progress=lambda n: conn.send(("episode", n)), **write_kwargs
+            _prefetch(episodes(start, stop)),
+            root,
+            repo_id,
+            progress=lambda n: conn.send(("episode", n)),
+            **write_kwargs,
         )
         conn.send(("done", written))
     except BaseException as exc:  # reported to the parent, which raises it
@@ -794,15 +801,14 @@ def _write_in_parts(
     write_kwargs: dict[str, Any],
     progress: Callable[[int], None] | None,
 ) -> tuple[int, int]:
-    """Write episodes ``0..num_episodes`` with ``workers`` writer processes, each making a
-    LeRobot dataset of a contiguous share, then join the shares into one at ``root`` with
-    lerobot's ``aggregate_datasets`` (episode order kept; each share's video files kept
-    as they are, statistics combined by lerobot). This process reads the episodes, one
-    thread per share, and hands them to the writers through pipes.
+    """Write episodes ``0..num_episodes`` with ``workers`` writer processes, each reading
+    and writing a contiguous share as a LeRobot dataset of its own, then join the shares
+    into one at ``root`` with lerobot's ``aggregate_datasets`` (episode order kept; each
+    share's video files kept as they are, statistics combined by lerobot).
 
-    Writers are forked: they start at once with lerobot already imported, and touch
-    nothing but lerobot's writer (TensorFlow, which may run in this process's readers,
-    is not used after a fork).
+    Writers are forked: they start at once with lerobot already imported. Reading a share
+    runs no TensorFlow op (NPZ files; RLDS shards through `rlds.read_tfrecords` and TFDS's
+    numpy parser), so it is safe in a process forked from one that ran TensorFlow.
     """
     import multiprocessing
     from multiprocessing.connection import wait
@@ -813,10 +819,18 @@ def _write_in_parts(
     writers, conns = [], []
     try:
         for i in range(workers):
-            ours, theirs = context.Pipe()
+            ours, theirs = context.Pipe(duplex=False)
             writer = context.Process(
                 target=_part_writer,
-                args=(theirs, parts[i], f"{repo_id}-part{i}", write_kwargs),
+                args=(
+                    theirs,
+                    episodes,
+                    bounds[i],
+                    bounds[i + 1],
+                    parts[i],
+                    f"{repo_id}-part{i}",
+                    write_kwargs,
+                ),
                 name=f"mikasa-lerobot-writer-{i}",
                 daemon=True,
             )
@@ -824,28 +838,6 @@ def _write_in_parts(
             theirs.close()
             writers.append(writer)
             conns.append(ours)
-        # Readers start only after every fork: a fork copies no thread, and a lock held by
-        # a reader at that moment would stay locked in the writer forever.
-        read_errors: list[BaseException] = []
-
-        def feed(i: int) -> None:
-            try:
-                for episode in episodes(bounds[i], bounds[i + 1]):
-                    conns[i].send(episode)
-                conns[i].send(None)
-            except (BrokenPipeError, ConnectionResetError, OSError):
-                pass  # the writer died; its exit is reported below
-            except BaseException as exc:
-                read_errors.append(exc)
-                for writer in writers:
-                    writer.terminate()
-
-        readers = [
-            threading.Thread(target=feed, args=(i,), name=f"mikasa-lerobot-reader-{i}", daemon=True)
-            for i in range(workers)
-        ]
-        for reader in readers:
-            reader.start()
         done_per_part = [0] * workers
         results: dict[int, tuple[int, int]] = {}
         pending = dict(enumerate(conns))
@@ -854,10 +846,7 @@ def _write_in_parts(
                 i = next(k for k, c in pending.items() if c is conn)
                 try:
                     kind, value = conn.recv()
-                except (EOFError, OSError):  # the writer exited (or was stopped after a read error)
-                    del pending[i]
-                    if read_errors:
-                        raise read_errors[0] from None
+                except (EOFError, OSError):
                     raise RuntimeError(
                         f"LeRobot writer process {i} exited (code {writers[i].exitcode}) "
                         "before finishing its episodes"
@@ -871,10 +860,6 @@ def _write_in_parts(
                 else:
                     results[i] = value
                     del pending[i]
-        for reader in readers:
-            reader.join()
-        if read_errors:
-            raise read_errors[0]
         _aggregate(parts, [f"{repo_id}-part{i}" for i in range(workers)], root, repo_id)
         return sum(r[0] for r in results.values()), sum(r[1] for r in results.values())
     finally:

@@ -71,6 +71,10 @@ class DatasetFormatError(ValueError):
         self.problem = problem
         super().__init__(f"{path}: {problem}")
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Picklable (errors of a converter's worker process reach the caller).
+        return type(self), (self.path, self.problem)
+
 
 class MissingDependencyError(ImportError):
     """An optional format library (tensorflow-datasets, lerobot, ...) is not installed."""

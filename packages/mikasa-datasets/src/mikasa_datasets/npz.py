@@ -186,6 +186,10 @@ class EpisodeFormatError(ValueError):
         self.problem = problem
         super().__init__(problem if path is None else f"{path}: {problem}")
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Picklable (errors of a converter's worker process reach the caller).
+        return type(self), (self.path, self.problem)
+
 
 class EpisodeInvariantError(EpisodeFormatError):
     """The arrays match the schema but break a §3.1 invariant (alignment, done, success)."""

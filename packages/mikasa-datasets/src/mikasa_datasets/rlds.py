@@ -124,13 +124,6 @@ def _tfds() -> Any:
     return tfds
 
 
-def _tf() -> Any:
-    _tfds()
-    import tensorflow as tf
-
-    return tf
-
-
 def rlds_features() -> Any:
     """The ``tfds.features.FeaturesDict`` of one RLDS episode (module docstring)."""
     tfds = _tfds()
@@ -554,7 +547,6 @@ def iter_examples(
     DatasetFormatError naming its shard file; shards wholly before ``start`` are not read
     (dataset_info.json gives each shard's length).
     """
-    tf = _tf()
     tfds = _tfds()
     vdir = find_version_dir(path)
     try:
@@ -577,19 +569,9 @@ def iter_examples(
         skip = max(0, start - first)
         take = length - skip if stop is None else min(length, stop - first) - skip
         first += length
-        records = tf.data.TFRecordDataset([str(shard)]).skip(skip).take(take)
-        it = iter(records)
-        while True:
+        for raw in read_tfrecords(shard, skip, take):
             try:
-                raw = next(it)
-            except StopIteration:
-                break
-            except tf.errors.OpError as exc:
-                raise DatasetFormatError(
-                    shard, f"corrupt or truncated TFRecord: {exc.message}"
-                ) from exc
-            try:
-                example = features.deserialize_example_np(raw.numpy())
+                example = features.deserialize_example_np(raw)
                 steps = _stack_steps(list(example["steps"]), steps_feature)
                 metadata = {k: example["episode_metadata"][k] for k in meta_feature.keys()}
             except Exception as exc:
@@ -597,6 +579,62 @@ def iter_examples(
                     shard, f"record does not match features.json: {exc}"
                 ) from exc
             yield shard, steps, metadata
+
+
+_TFRECORD_MASK_DELTA = 0xA282EAD8
+
+
+def _masked_crc32c(data: bytes | memoryview) -> int:
+    """TFRecord's checksum: CRC-32C, rotated right by 15 bits, plus a constant."""
+    crc = require("google_crc32c", "rlds").value(data)
+    return (((crc >> 15) | (crc << 17)) + _TFRECORD_MASK_DELTA) & 0xFFFFFFFF
+
+
+def read_tfrecords(
+    path: str | os.PathLike[str], skip: int = 0, take: int | None = None
+) -> Iterator[bytes]:
+    """The records of a TFRecord file, from the ``skip``-th, at most ``take`` of them.
+
+    Read in Python (no TensorFlow op runs, so this works in a process forked from one that
+    ran TensorFlow), every record's length and data checked against their CRC-32C
+    checksums; a cut or corrupt file raises DatasetFormatError naming it. Skipped records
+    are stepped over by their lengths, not read.
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        index = 0
+        while take is None or index < skip + take:
+            header = f.read(12)
+            if not header:
+                return
+            if len(header) < 12:
+                raise DatasetFormatError(
+                    path, f"corrupt or truncated TFRecord: record {index}'s header is cut"
+                )
+            length, length_crc = struct.unpack("<QI", header)
+            if _masked_crc32c(header[:8]) != length_crc:
+                raise DatasetFormatError(
+                    path,
+                    f"corrupt or truncated TFRecord: record {index}'s length fails its checksum",
+                )
+            if f.tell() + length + 4 > size:
+                raise DatasetFormatError(
+                    path,
+                    f"corrupt or truncated TFRecord: record {index} ends past the end of the file",
+                )
+            if index < skip:
+                f.seek(length + 4, os.SEEK_CUR)
+            else:
+                data = f.read(length)
+                (data_crc,) = struct.unpack("<I", f.read(4))
+                if _masked_crc32c(data) != data_crc:
+                    raise DatasetFormatError(
+                        path,
+                        f"corrupt or truncated TFRecord: record {index}'s data fails its checksum",
+                    )
+                yield data
+            index += 1
 
 
 def _stack_steps(steps: list[dict[str, Any]], feature: Any) -> dict[str, Any]:
