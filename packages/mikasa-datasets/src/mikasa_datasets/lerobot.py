@@ -33,14 +33,17 @@ defaults to 10 (spec §7.1). The source ``metadata.json`` (NPZ or RLDS, same con
 copied to ``<dataset root>/source_rlds_metadata.json``; the loader takes episode seeds
 and ``success_once`` from it.
 
-Three fixes to lerobot 0.4.4's writer apply while we write (`_lerobot_writer_fixes`,
-restored after): image statistics computed from each frame's value counts, which is
-right where lerobot's uint8 arithmetic wrapped (stats.json had a wrong image std; upstream
-fixed it later, huggingface/lerobot#3697) and ~20x cheaper than its per-pixel histogram
-update; ``embed_images``, a no-op for video features that cost ~4 ms per frame, skipped;
-video files cut at `VIDEO_FILE_SIZE_IN_MB` so that appending an episode (a re-mux of the
-whole current file) stays cheap. Together: 1.6x faster conversion of the synthetic
-benchmark task.
+Fixes to lerobot 0.4.4's writer apply while we write (`_lerobot_writer_fixes`, restored
+after): image statistics computed from each frame's value counts, which is right where
+lerobot's uint8 arithmetic wrapped (stats.json had a wrong image std; upstream fixed it
+later, huggingface/lerobot#3697) and ~15x cheaper than its per-pixel histogram update; the
+other per-episode statistics with their per-channel loops vectorised (same numbers);
+``embed_images``, a no-op for video features, skipped; random fingerprints for lerobot's
+per-episode ``datasets`` tables; the pinned H.264 options; FFmpeg's info logging off.
+Episode videos are written one file each and joined once at the end
+(`join_episode_videos`) instead of lerobot's per-episode re-mux of the growing file, and
+large conversions run in several writer processes joined by lerobot's aggregation
+(`writer_count`). Measured figures: the package README.
 
 Environment notes (see the package README): lerobot 0.4.x pins torch<2.11 but its
 dataset code runs on the repository's torch 2.13 CPU; PyPI's torchvision wheels are CUDA
