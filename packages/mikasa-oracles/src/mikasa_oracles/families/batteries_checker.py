@@ -24,11 +24,11 @@ from __future__ import annotations
 from collections.abc import Callable, Generator, Iterator
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from transforms3d.quaternions import qmult, quat2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.scripted import ScriptedOracle
 
 Actions = Generator[np.ndarray, None, bool]
 
@@ -81,16 +81,9 @@ def finger_target(gripper: float) -> float:
     return -0.01 + (gripper + 1.0) / 2.0 * 0.05
 
 
-class BatteriesCheckerOracle:
+class BatteriesCheckerOracle(ScriptedOracle):
     """Scripted solver of both BatteriesChecker families; ``num_envs == 1``."""
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
 
     def reset(self) -> None:
         """Forget the previous episode."""

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
+from mikasa_oracles.scripted import ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 # TCP heights: parked / travelling above the caps, pushing (the press registers at
@@ -28,19 +28,12 @@ LIFT_Z = 0.18
 ALIGN_TOLERANCE = 0.01
 
 
-class BlinkCountOracle:
+class BlinkCountOracle(ScriptedOracle):
     """Scripted solver of BlinkCountButtonPress; ``num_envs == 1``.
 
     Follows the bench policy protocol: ``chunk_size``, ``reset()``, ``forward(obs)``.
     """
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
 
     def reset(self) -> None:
         """Forget the previous episode's blinks."""

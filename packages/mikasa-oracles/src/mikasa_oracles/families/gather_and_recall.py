@@ -17,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from mikasa_oracles.scripted import ScriptedOracle
 from mikasa_oracles.waypoints import (
     GRIPPER_CLOSED,
     Waypoint,
@@ -38,10 +39,9 @@ PLACED_MAX_Z = 0.1
 SPOT_TAKEN_RADIUS = 0.035
 
 
-class GatherAndRecallOracle:
+class GatherAndRecallOracle(ScriptedOracle):
     """Scripted solver of GatherAndRecall; one instance per env, ``num_envs == 1``."""
 
-    chunk_size = 1
     TRAVEL_Z = 0.15
     APPROACH_Z = 0.12
     GRASP_Z = 0.02  # TCP at the centre of a cube standing on the table
@@ -52,11 +52,9 @@ class GatherAndRecallOracle:
     CLOSE_STEPS = 5
     RELEASE_STEPS = 3
 
-    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.follower = WaypointFollower(gain)
-        self.reset()
+    def __init__(self, env: gym.Env, gain: float | None = None) -> None:
+        self.follower = WaypointFollower(self.GAIN if gain is None else gain)
+        super().__init__(env, gain)
 
     def reset(self) -> None:
         """Forget the previous episode."""

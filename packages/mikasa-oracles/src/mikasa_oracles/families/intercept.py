@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards, tilted
+from mikasa_oracles.scripted import ScriptedOracle
 
 DOWN_QUAT = np.array([0.0, 1.0, 0.0, 0.0])
 DOWN_ROTATION = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])  # TCP pointing down
@@ -111,7 +111,7 @@ def merge_lead(ball_along: float, wait_along: float, merge_length: float) -> flo
     return wait_along + progress**2 / (4 * merge_length)
 
 
-class BallChaser:
+class BallChaser(ScriptedOracle):
     """Shared approach of both oracles: meet the ball and move along with it.
 
     Plan: pick a wait point on the predicted path (shifted by ``hand_offset``) that the
@@ -119,8 +119,6 @@ class BallChaser:
     hand ends up at the ball's position plus the offset, at the ball's speed (``merge_lead``).
     Subclasses say what to do from there in ``_act``.
     """
-
-    chunk_size = 1
 
     HOVER_Z = 0.075  # fingertips ~1 cm below the TCP, clear of the ball's top (0.04)
     LOW_Z = 0.02  # TCP height at which the fingertips meet the ball's equator
@@ -132,10 +130,6 @@ class BallChaser:
     MERGE_STEPS = 2.0  # merge_length = this many steps of ball travel
     EARLY_GRIPPER = GRIPPER_OPEN
 
-    def __init__(self, env: gym.Env) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.reset()
 
     def reset(self) -> None:
         """Forget the previous episode."""

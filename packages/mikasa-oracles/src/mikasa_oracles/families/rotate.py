@@ -24,12 +24,12 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import gymnasium as gym
 import numpy as np
 from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
+from mikasa_oracles.scripted import ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 GRIPPER_OPEN = 1.0
@@ -73,22 +73,17 @@ def hand_rotation(yaw: float, goal_xy: np.ndarray | None = None) -> np.ndarray:
     return lean @ rotation
 
 
-class RotateOracleBase:
+class RotateOracleBase(ScriptedOracle):
     """Shared bookkeeping: the target, the tracked turn, a stage machine; ``num_envs == 1``.
 
     Follows the bench policy protocol: ``chunk_size``, ``reset()``, ``forward(obs)``.
     """
 
-    chunk_size = 1
     # Stop correcting once the tracked turn is this close to the target (rad); resume if the
     # peg drifts beyond RESUME_ERROR (the success tolerance is 0.1).
     DONE_ERROR: ClassVar[float] = 0.02
     RESUME_ERROR: ClassVar[float] = 0.07
 
-    def __init__(self, env: gym.Env) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.reset()
 
     def reset(self) -> None:
         """Forget the previous episode."""

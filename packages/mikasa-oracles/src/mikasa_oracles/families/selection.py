@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.scripted import ScriptedOracle
 
 # Hidden objects are parked at z = 1000; anything below this height is on the table.
 VISIBLE_BELOW_Z = 1.0
@@ -30,19 +30,13 @@ TILT_PER_M = 4.0
 MAX_TILT = 0.8
 
 
-class SelectionOracle:
+class SelectionOracle(ScriptedOracle):
     """Scripted solver of the selection tasks; one instance per env, ``num_envs == 1``.
 
     Follows the bench policy protocol: ``chunk_size``, ``reset()``, ``forward(obs)``.
     """
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.5) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
+    GAIN = 1.5
 
     def reset(self) -> None:
         """Forget the previous episode's cue."""

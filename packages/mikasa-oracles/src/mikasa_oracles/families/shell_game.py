@@ -17,13 +17,13 @@ import itertools
 import math
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from transforms3d.axangles import mat2axangle
 from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
+from mikasa_oracles.scripted import ScriptedOracle
 
 # Hidden objects are parked 1000 m up; anything below this height is in view.
 VISIBLE_BELOW_Z = 1.0
@@ -53,20 +53,14 @@ class MugTracker:
         return int(np.argmin(np.linalg.norm(self.positions[:, :2] - xy, axis=1)))
 
 
-class ShellGameOracle:
+class ShellGameOracle(ScriptedOracle):
     """Observes the cue and tracks the mugs; subclasses choose the target mug and the motion.
 
     One instance per env, ``num_envs == 1``; bench policy protocol: ``chunk_size``,
     ``reset()``, ``forward(obs)``.
     """
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.5) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
+    GAIN = 1.5
 
     def reset(self) -> None:
         """Forget the previous episode."""

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from transforms3d.euler import euler2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.scripted import ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 DOWN = np.array([0.0, 1.0, 0.0, 0.0])  # TCP orientation (w, x, y, z) pointing straight down
@@ -56,16 +56,10 @@ MAX_YAW = 0.6
 RETURN_STOP = 0.02
 
 
-class TakeItBackOracle:
+class TakeItBackOracle(ScriptedOracle):
     """Scripted solver of TakeItBack; one instance per env, ``num_envs == 1``."""
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.5) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
+    GAIN = 1.5
 
     def reset(self) -> None:
         """Forget the previous episode."""

@@ -13,13 +13,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from mikasa_oracles.scripted import ScriptedOracle
 from mikasa_oracles.waypoints import GRIPPER_CLOSED, Waypoint, WaypointFollower, shown_bulb
 
 
-class TimedTransferOracle:
+class TimedTransferOracle(ScriptedOracle):
     """Scripted solver of TimedTransfer; one instance per env, ``num_envs == 1``."""
 
-    chunk_size = 1
     # TCP heights: above the cube before descending, carrying, hovering over the red disc
     # (cube centre ≈ 0.10, clear of the 0.066 "on red" limit) and the placement target.
     APPROACH_Z = 0.12
@@ -30,11 +30,9 @@ class TimedTransferOracle:
     # The descent from HOVER_Z takes this many steps to bring the cube below 0.066.
     DESCENT_STEPS = 2
 
-    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.follower = WaypointFollower(gain)
-        self.reset()
+    def __init__(self, env: gym.Env, gain: float | None = None) -> None:
+        self.follower = WaypointFollower(self.GAIN if gain is None else gain)
+        super().__init__(env, gain)
 
     def reset(self) -> None:
         """Forget the previous episode."""

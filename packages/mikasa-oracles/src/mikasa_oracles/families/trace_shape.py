@@ -15,7 +15,6 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from mikasa_envs.tasks._trace_shape import (
     BULB_GREEN,
@@ -28,6 +27,7 @@ from transforms3d.axangles import axangle2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
+from mikasa_oracles.scripted import ScriptedOracle
 
 GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
 # Hidden objects are parked at z = 1000; anything below this height is in view.
@@ -56,16 +56,9 @@ DROP_STEPS = 3
 Action = np.ndarray
 
 
-class TraceShapeOracle:
+class TraceShapeOracle(ScriptedOracle):
     """Scripted solver of TraceShape / TraceShapeSeq; one instance per env, ``num_envs == 1``."""
 
-    chunk_size = 1
-
-    def __init__(self, env: gym.Env, gain: float = 1.0) -> None:
-        self.env = env
-        self.base = env.unwrapped
-        self.gain = gain
-        self.reset()
 
     def reset(self) -> None:
         """Forget the previous demonstration and restart the script."""
