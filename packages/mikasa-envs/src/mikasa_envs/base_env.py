@@ -18,6 +18,7 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
+from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs import render_batcher
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
@@ -63,6 +64,9 @@ class MikasaVLABaseEnv(BaseEnv):
     DENSE_REWARD_MAX: ClassVar[float] = 3.0
 
     SENSOR_SIZE: ClassVar[int] = 128
+    # GPU PhysX buffers a family raises above ManiSkill's defaults (upstream's values),
+    # e.g. {"found_lost_pairs_capacity": 2**25}; used by the GPU sim only.
+    GPU_MEMORY: ClassVar[dict[str, int]] = {}
     BASE_CAMERA_EYE: ClassVar[tuple[float, float, float]] = (0.3, 0.0, 0.6)
     BASE_CAMERA_TARGET: ClassVar[tuple[float, float, float]] = (-0.1, 0.0, 0.1)
     RENDER_CAMERA_EYE: ClassVar[tuple[float, float, float]] = (0.5, 1.0, 1.0)
@@ -253,6 +257,10 @@ class MikasaVLABaseEnv(BaseEnv):
         global RNG (render_batcher.global_rng_section)."""
         with render_batcher.global_rng_section():
             return super().reset(seed=seed, options=options)
+
+    @property
+    def _default_sim_config(self) -> SimConfig:
+        return SimConfig(gpu_memory_config=GPUMemoryConfig(**self.GPU_MEMORY))
 
     def step(self, action: Any):
         """ManiSkill's step with input checks; ``terminated`` is the family's `_terminated`."""

@@ -21,7 +21,6 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from mani_skill.utils.structs import Actor
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
@@ -106,13 +105,11 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     cubes: dict[int, Actor]
 
     # ------------------------------------------------------------------ scene
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(
-            gpu_memory_config=GPUMemoryConfig(
-                found_lost_pairs_capacity=2**25, max_rigid_contact_count=2**21, max_rigid_patch_count=2**18
-            )
-        )
+    GPU_MEMORY: ClassVar[dict[str, int]] = {
+        "found_lost_pairs_capacity": 2**25,
+        "max_rigid_contact_count": 2**21,
+        "max_rigid_patch_count": 2**18,
+    }
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)

@@ -15,17 +15,14 @@ import sapien
 import torch
 from mani_skill.utils.building import actors
 from mani_skill.utils.structs import Actor, Pose
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 
 BALL_RGBA = (1.0, 0.0, 0.0, 1.0)
 
 
-def small_scene_sim_config() -> SimConfig:
-    """ManiSkill defaults with upstream's GPU buffers for Intercept, InterceptGrab and
-    TakeItBack (found-lost pairs 2^25, rigid patches 2^18; GPU only)."""
-    return SimConfig(gpu_memory_config=GPUMemoryConfig(found_lost_pairs_capacity=2**25, max_rigid_patch_count=2**18))
+SMALL_SCENE_GPU_MEMORY = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
+"""Upstream's GPU buffers for Intercept, InterceptGrab and TakeItBack (GPU sim only)."""
 
 
 class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
@@ -49,9 +46,7 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
 
     ball: Actor
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return small_scene_sim_config()
+    GPU_MEMORY: ClassVar[dict[str, int]] = SMALL_SCENE_GPU_MEMORY
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)

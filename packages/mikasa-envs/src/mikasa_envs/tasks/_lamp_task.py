@@ -8,7 +8,6 @@ from typing import ClassVar
 import numpy as np
 import torch
 from mani_skill.utils.structs import Actor
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 
@@ -37,9 +36,7 @@ class LampTaskVLABaseEnv(MikasaVLABaseEnv):
     # Dense reward of a failed step (the success value is DENSE_REWARD_MAX).
     DENSE_REWARD_FAIL: ClassVar[float] = -25.0
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(gpu_memory_config=GPUMemoryConfig(found_lost_pairs_capacity=2**25, max_rigid_patch_count=2**18))
+    GPU_MEMORY: ClassVar[dict[str, int]] = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
 
     def _sample_phase_lengths(self, env_idx: torch.Tensor) -> None:
         # No phases (and no random draws for them): the action phase starts at t = 0.

@@ -30,7 +30,6 @@ import sapien
 import torch
 from mani_skill.utils.building import actors as actor_builders
 from mani_skill.utils.structs import Actor
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import rgba01
@@ -97,13 +96,11 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
 
     mugs: list[Actor]
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(
-            gpu_memory_config=GPUMemoryConfig(
-                found_lost_pairs_capacity=2**25, max_rigid_patch_count=2**21, max_rigid_contact_count=2**22
-            )
-        )
+    GPU_MEMORY: ClassVar[dict[str, int]] = {
+        "found_lost_pairs_capacity": 2**25,
+        "max_rigid_patch_count": 2**21,
+        "max_rigid_contact_count": 2**22,
+    }
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:

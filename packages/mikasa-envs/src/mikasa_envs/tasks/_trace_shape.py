@@ -25,7 +25,6 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.utils.structs import Actor, Pose
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube, rgba01
@@ -127,9 +126,7 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     green_cube: Actor
     lamp: ColorSwitchLamp
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(gpu_memory_config=GPUMemoryConfig(found_lost_pairs_capacity=2**25, max_rigid_patch_count=2**18))
+    GPU_MEMORY: ClassVar[dict[str, int]] = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:

@@ -17,7 +17,6 @@ from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import torch
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
@@ -125,11 +124,7 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         self.blink_color = blink_rgb255(blink_color)
         super().__init__(*args, **kwargs)
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(
-            gpu_memory_config=GPUMemoryConfig(found_lost_pairs_capacity=2**25, max_rigid_patch_count=2**18)
-        )
+    GPU_MEMORY: ClassVar[dict[str, int]] = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
 
     @property
     def max_blinks(self) -> int:

@@ -7,7 +7,6 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from mani_skill.utils.structs import Actor, Pose
-from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
 from mikasa_envs.building_blocks.buttons import BUTTON_TOP_Z, MAX_PRESS_DEPTH, PRESSED_DEPTH, Button
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube, rgba01
@@ -99,13 +98,11 @@ class GatherAndRecallVLABaseEnv(LampTaskVLABaseEnv):
     buttons: list[Button]
     lamp: ColorSwitchLamp
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(
-            gpu_memory_config=GPUMemoryConfig(
-                found_lost_pairs_capacity=2**25, max_rigid_contact_count=2**21, max_rigid_patch_count=2**18
-            )
-        )
+    GPU_MEMORY: ClassVar[dict[str, int]] = {
+        "found_lost_pairs_capacity": 2**25,
+        "max_rigid_contact_count": 2**21,
+        "max_rigid_patch_count": 2**18,
+    }
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:

@@ -9,7 +9,6 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.utils.structs import Actor, Pose
-from mani_skill.utils.structs.types import SimConfig
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import build_colored_cube, rgba01
@@ -20,7 +19,7 @@ from mikasa_envs.building_blocks.targets import (
     set_disc_pose,
 )
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._intercept import small_scene_sim_config
+from mikasa_envs.tasks._intercept import SMALL_SCENE_GPU_MEMORY
 
 CUBE_GREEN_255 = (0, 255, 0, 255)
 START_MARKER_BLUE_255 = (0, 0, 255, 255)
@@ -67,9 +66,7 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
 
     cube: Actor
 
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return small_scene_sim_config()
+    GPU_MEMORY: ClassVar[dict[str, int]] = SMALL_SCENE_GPU_MEMORY
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)
