@@ -66,13 +66,11 @@ def write_actor_poses(
         for actor, row in zip(actors, rows, strict=True):
             set_cpu_actor_pose(actor, row, zero_velocity)
         return
-    zeros = torch.zeros(len(env_idx), 3, device=poses.device)
     with only_rows(scene, env_idx):
         for k, actor in enumerate(actors):
             actor.set_pose(Pose.create(poses[:, k]))
-            if zero_velocity:
-                actor.set_linear_velocity(zeros)
-                actor.set_angular_velocity(zeros)
+    if zero_velocity:
+        zero_actor_velocities(scene, actors, env_idx)
 
 
 def zero_actor_velocities(scene: ManiSkillScene, actors: Sequence[Actor], env_idx: torch.Tensor) -> None:
