@@ -224,8 +224,13 @@ else:
         # Written one file per episode, then joined: a size that holds episodes 0 and 1.
         monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
         apart = lr.convert_npz_to_lerobot(npz_task, tmp_path / "apart")
-        files = sorted((apart.path / "videos" / lr.TOP_KEY).rglob("*.mp4"))
-        pair = (files[0].stat().st_size + files[1].stat().st_size) * 1.01 / 2**20
+        sizes = {
+            key: [f.stat().st_size for f in sorted((apart.path / "videos" / key).rglob("*.mp4"))]
+            for key in (lr.TOP_KEY, lr.WRIST_KEY)
+        }
+        pair = max(s[0] + s[1] for s in sizes.values()) * 1.01
+        assert all(sum(s) >= pair for s in sizes.values())  # all three fit in no camera
+        pair /= 2**20
         monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", pair)
         joined = lr.convert_npz_to_lerobot(npz_task, tmp_path / "joined")
         for key in (lr.TOP_KEY, lr.WRIST_KEY):
@@ -245,6 +250,29 @@ else:
         assert int(first_of_ep1["episode_index"]) == 1 and int(first_of_ep1["frame_index"]) == 0
         frame = (first_of_ep1[lr.TOP_KEY].numpy().transpose(1, 2, 0) * 255).round().astype(np.uint8)
         assert lr.psnr(frame, load_episodes(apart.path)[1]["rgb"][0, ..., :3]) > 40.0
+
+    @pytest.mark.parametrize("vcodec", ["h264", "libsvtav1"])
+    def test_every_episode_video_decodes_on_its_own(
+        npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, vcodec: str
+    ) -> None:
+        """H.264 episodes come from one encoder per camera (each starting on a keyframe),
+        AV1 ones from an encoder per episode: either way each file is a whole video."""
+        import av
+
+        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)  # left one file per episode
+        r = lr.convert_npz_to_lerobot(npz_task, tmp_path / vcodec, vcodec=vcodec)
+        source = load_episodes(npz_task)
+        for key, cam in ((lr.TOP_KEY, slice(0, 3)), (lr.WRIST_KEY, slice(3, 6))):
+            files = sorted((r.path / "videos" / key).rglob("*.mp4"))
+            assert len(files) == len(LENGTHS)
+            for episode, path in zip(source, files, strict=True):
+                with av.open(str(path)) as container:
+                    frames = list(container.decode(video=0))
+                assert len(frames) == int(episode["episode_length"]) and frames[0].key_frame
+                decoded = np.stack([f.to_ndarray(format="rgb24") for f in frames])
+                assert lr.psnr(decoded, episode["rgb"][..., cam]) >= MIN_PSNR_DB
+        assert lr._EpisodeVideoEncoder(10, "h264", "yuv420p", 2, 30, None, 1).persistent
+        assert not lr._EpisodeVideoEncoder(10, "libsvtav1", "yuv420p", 2, 30, None, 1).persistent
 
     def test_loads_offline_with_lerobot_dataset(from_npz: lr.ConversionResult) -> None:
         import os

@@ -110,12 +110,17 @@ LEROBOT_DIRNAME = "data_lerobot"
 DEFAULT_FPS = 10
 ROBOT_TYPE = "mikasa_robo"
 DEFAULT_VCODEC = "h264"
-H264_OPTIONS = {"crf": "23", "preset": "ultrafast"}
+H264_OPTIONS = {"qp": "23", "preset": "ultrafast"}
 """libx264 settings pinned for ``vcodec="h264"`` (lerobot's own: crf 30, x264's default
 preset "medium"). On rendered 128x128 scenes, per camera-frame on one core of this
 machine: crf 23 / ultrafast 0.6 ms, 31.3 dB, 3.5 kB; lerobot's h264 settings 1.8 ms,
-28.9 dB, 1.1 kB; lerobot's AV1 (SVT-AV1 preset 12, crf 30) 6.1 ms, 30.4 dB, 2.3 kB. GOP 2
-and yuv420p stay lerobot's."""
+28.9 dB, 1.1 kB; lerobot's AV1 (SVT-AV1 preset 12, crf 30) 6.1 ms, 30.4 dB, 2.3 kB. A
+constant quantiser (qp 23: the same PSNR as crf 23 within 0.1 dB, 7% smaller) rather than
+crf: x264's crf carries rate-control state from frame to frame, so with one encoder per
+camera for a whole write (`_EpisodeVideoEncoder`) an episode's video would depend on the
+episodes encoded before it; at a constant quantiser it depends on its own frames only, and
+a conversion gives the same frames for any number of writers. GOP 2 and yuv420p stay
+lerobot's."""
 SOURCE_METADATA_NAME = "source_rlds_metadata.json"
 
 TOP_KEY = "observation.images.top"
@@ -473,6 +478,13 @@ def _random_dataset_fingerprints() -> Callable[[], None]:
     return lambda: setattr(arrow_dataset, "generate_fingerprint", original)
 
 
+def _pin_h264(options: dict[str, str]) -> None:
+    """Replace lerobot's H.264 rate control (``crf``, which x264 prefers over ``qp`` when
+    both are given) by `H264_OPTIONS`."""
+    options.pop("crf", None)
+    options.update(H264_OPTIONS)
+
+
 def _pin_h264_options() -> Callable[[], None]:
     """Make lerobot's encoders use `H264_OPTIONS` for h264; return the undo."""
     from lerobot.datasets import video_utils
@@ -483,7 +495,7 @@ def _pin_h264_options() -> Callable[[], None]:
     def codec_options(vcodec: str, *args: Any, **kwargs: Any) -> dict:
         options = original(vcodec, *args, **kwargs)
         if vcodec in ("h264", "libx264"):
-            options.update(H264_OPTIONS)
+            _pin_h264(options)
         return options
 
     video_utils._get_codec_options = codec_options
@@ -499,6 +511,229 @@ def _quiet_libav() -> Callable[[], None]:
 
     av.logging.set_libav_level(av.logging.ERROR)
     return lambda: av.logging.set_libav_level(av.logging.INFO)
+
+
+class _EpisodeVideoEncoder:
+    """Encodes an episode's camera videos in the calling thread: stands in for lerobot's
+    ``StreamingVideoEncoder`` (same methods and codec settings, one MP4 file per camera and
+    episode, the same image statistics), with whole episodes fed at once (`feed_frames`).
+
+    lerobot's encoder starts a thread, a temporary directory and an encoder per camera and
+    episode, and hands every frame through a queue to a thread that converts it via PIL and
+    updates the statistics holding the GIL. For H.264 this keeps one encoder per camera
+    for the whole write instead (x264's start-up cost ~40% of encoding a 15-frame
+    episode): zero-latency settings, so every frame's packet comes out at once; each
+    episode starts on a forced IDR frame and its packets go to the episode's own file,
+    timestamps from 0, so every file decodes on its own (`PERSISTENT_H264_OPTIONS`).
+    Other codecs (AV1 has a delay) get a new encoder per episode, as in lerobot.
+    """
+
+    PERSISTENT_H264_OPTIONS = {"tune": "zerolatency", "forced-idr": "1"}
+    """Added to the H.264 options of the persistent encoders: no lookahead or frame
+    threads (no frame held back), and a requested keyframe is an IDR frame."""
+
+    def __init__(
+        self,
+        fps: int,
+        vcodec: str,
+        pix_fmt: str,
+        g: int | None,
+        crf: int | None,
+        preset: int | None,
+        encoder_threads: int | None,
+    ) -> None:
+        from lerobot.datasets import video_utils
+
+        self.fps, self.vcodec, self.pix_fmt = fps, vcodec, pix_fmt
+        self.options = video_utils._get_codec_options(vcodec, g, crf, preset)
+        if vcodec in ("h264", "libx264"):
+            _pin_h264(self.options)
+        if encoder_threads is not None:
+            if vcodec == "libsvtav1":
+                params = self.options.get("svtav1-params")
+                lp = f"lp={encoder_threads}"
+                self.options["svtav1-params"] = f"{params}:{lp}" if params else lp
+            else:
+                self.options["threads"] = str(encoder_threads)
+        self.persistent = vcodec in ("h264", "libx264")
+        if self.persistent:
+            self.options.update(self.PERSISTENT_H264_OPTIONS)
+        self._encoders: dict[str, dict[str, Any]] = {}  # camera -> persistent encoder
+        self._dir: Path | None = None
+        self._cameras: dict[str, dict[str, Any]] = {}  # camera -> this episode's file
+
+    @classmethod
+    def replacing(cls, lerobot_encoder: Any) -> _EpisodeVideoEncoder | None:
+        """One with the settings of lerobot's ``lerobot_encoder``; None when there is none
+        or it is not the 0.4.x ``StreamingVideoEncoder`` this stands in for."""
+        names = ("fps", "vcodec", "pix_fmt", "g", "crf", "preset", "encoder_threads")
+        if lerobot_encoder is None or not all(hasattr(lerobot_encoder, n) for n in names):
+            return None
+        return cls(*(getattr(lerobot_encoder, n) for n in names))
+
+    def start_episode(self, video_keys: list[str], temp_dir: Path) -> None:
+        """Begin an episode with these cameras; its files go to a new directory in
+        ``temp_dir`` (lerobot moves them into the dataset)."""
+        import tempfile
+
+        self.cancel_episode()
+        self._dir = Path(tempfile.mkdtemp(dir=temp_dir))
+        self._cameras = {key: {} for key in video_keys}
+
+    def feed_frame(self, video_key: str, image: np.ndarray) -> None:
+        """Encode one HWC uint8 frame of ``video_key`` (lerobot's interface)."""
+        self.feed_frames(video_key, np.asarray(image)[None])
+
+    def feed_frames(self, video_key: str, frames: np.ndarray) -> None:
+        """Encode ``frames`` [T, H, W, 3] uint8 of ``video_key`` and add each frame to the
+        camera's statistics, as lerobot's encoder thread does frame by frame."""
+        import av
+
+        if video_key not in self._cameras:
+            raise RuntimeError(f"{video_key!r} is not a camera of the current episode")
+        frames = np.ascontiguousarray(frames)
+        if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[-1] != 3:
+            raise ValueError(
+                f"{video_key}: frames must be uint8 [T, H, W, 3], got {frames.dtype} {frames.shape}"
+            )
+        camera = self._cameras[video_key] or self._open(video_key, *frames.shape[1:3])
+        encoder, stream, container = camera["encoder"], camera["stream"], camera["container"]
+        for frame in frames:
+            video_frame = av.VideoFrame.from_numpy_buffer(frame, format="rgb24")
+            video_frame.time_base = self._time_base  # the muxer changes the stream's
+            if encoder is None:  # an encoder of this episode's file
+                video_frame.pts = camera["count"]
+                container.mux(stream.encode(video_frame))
+            else:
+                video_frame.pts = camera["base"] + camera["count"]
+                if camera["count"] == 0:
+                    video_frame.pict_type = av.video.frame.PictureType.I
+                packets = encoder["codec"].encode(video_frame)
+                camera["held"] |= not packets
+                self._mux(camera, packets)
+            _update_from_value_counts(camera["stats"], frame.reshape(-1, 3))
+            camera["count"] += 1
+
+    @property
+    def _time_base(self) -> Any:
+        from fractions import Fraction
+
+        return Fraction(1, self.fps)
+
+    def _open(self, video_key: str, height: int, width: int) -> dict[str, Any]:
+        """The episode's file for ``video_key``, its stream, and the encoder feeding it."""
+        import av
+        from lerobot.datasets.compute_stats import RunningQuantileStats
+
+        name = video_key.replace("/", "_")
+        path = self._dir / name / f"{name}_streaming.mp4"  # lerobot removes the folder
+        path.parent.mkdir()
+        container = av.open(str(path), "w")
+        encoder = None
+        if self.persistent:
+            encoder = self._encoders.get(video_key)
+            if encoder is None or encoder["size"] != (height, width):
+                encoder = self._encoders[video_key] = self._persistent_encoder(height, width)
+            stream = container.add_stream_from_template(encoder["template"], opaque=True)
+            stream.codec_context.extradata = encoder["codec"].extradata
+            stream.time_base = self._time_base
+        else:
+            stream = self._add_stream(container, height, width)
+        camera = self._cameras[video_key]
+        camera.update(
+            path=path, container=container, stream=stream, encoder=encoder, count=0,
+            held=False, stats=RunningQuantileStats(),
+            base=encoder["next_pts"] if encoder else 0,
+        )
+        return camera
+
+    def _add_stream(self, container: Any, height: int, width: int) -> Any:
+        stream = container.add_stream(self.vcodec, self.fps, options=dict(self.options))
+        stream.pix_fmt, stream.height, stream.width = self.pix_fmt, height, width
+        stream.time_base = self._time_base
+        return stream
+
+    def _persistent_encoder(self, height: int, width: int) -> dict[str, Any]:
+        """An open H.264 encoder with global headers, and a stream template to give each
+        episode's file: an ordinary file of one frame made with the same settings (so the
+        same parameter sets), opened for reading, whose stream is copied without opening
+        an encoder. Each file's header gets the encoder's own parameter sets."""
+        import io
+
+        import av
+
+        buffer = io.BytesIO()
+        with av.open(buffer, "w", format="mp4") as container:
+            stream = self._add_stream(container, height, width)
+            frame = av.VideoFrame.from_ndarray(np.zeros((height, width, 3), np.uint8), "rgb24")
+            frame.pts, frame.time_base = 0, self._time_base
+            container.mux(stream.encode(frame))
+            container.mux(stream.encode())
+        buffer.seek(0)
+        template = av.open(buffer)
+        codec = av.CodecContext.create(self.vcodec, "w")
+        codec.width, codec.height, codec.pix_fmt = width, height, self.pix_fmt
+        codec.time_base, codec.framerate = self._time_base, self.fps
+        codec.options = dict(self.options)
+        codec.flags |= av.codec.context.Flags.global_header
+        codec.open()
+        return {
+            "codec": codec, "size": (height, width), "next_pts": 0,
+            "template": template.streams.video[0], "template_container": template,
+        }
+
+    @staticmethod
+    def _mux(camera: dict[str, Any], packets: list[Any]) -> None:
+        """Mux a persistent encoder's ``packets`` into the episode's file, timestamps
+        counted from the episode's first frame; each lasts one frame (the last one's
+        duration is the file's end)."""
+        for packet in packets:
+            packet.pts -= camera["base"]
+            packet.dts -= camera["base"]
+            packet.duration = packet.duration or 1
+            packet.stream = camera["stream"]
+            camera["container"].mux(packet)
+
+    def finish_episode(self) -> dict[str, tuple[Path, dict | None]]:
+        """Flush and close the episode's files: ``{camera: (mp4 path, statistics)}``,
+        statistics None below two frames (as lerobot's encoder)."""
+        results = {}
+        for key, camera in self._cameras.items():
+            if not camera:
+                raise RuntimeError(f"no frames were fed for {key!r}")
+            encoder = camera["encoder"]
+            if encoder is None:
+                camera["container"].mux(camera["stream"].encode())
+            elif camera["held"]:
+                # A frame was held back after all: flush, which ends this encoder.
+                self._mux(camera, encoder["codec"].encode(None))
+                del self._encoders[key]
+            else:
+                encoder["next_pts"] = camera["base"] + camera["count"]
+            camera["container"].close()
+            stats = camera["stats"].get_statistics() if camera["count"] >= 2 else None
+            results[key] = (camera["path"], stats)
+        self._cameras, self._dir = {}, None
+        return results
+
+    def cancel_episode(self) -> None:
+        """Drop the current episode's files, if any."""
+        for key, camera in self._cameras.items():
+            if camera:
+                with contextlib.suppress(Exception):
+                    camera["container"].close()
+                # Its encoder's state is mid-episode: start the next episode afresh.
+                self._encoders.pop(key, None)
+        if self._dir is not None:
+            shutil.rmtree(self._dir, ignore_errors=True)
+        self._cameras, self._dir = {}, None
+
+    def close(self) -> None:
+        """lerobot calls this in ``finalize``."""
+        self.cancel_episode()
+        for encoder in self._encoders.values():
+            encoder["template_container"].close()
+        self._encoders.clear()
 
 
 def write_lerobot(
@@ -552,6 +787,9 @@ def write_lerobot(
     dataset = cls.create(**{k: v for k, v in kwargs.items() if k in supported})
     if "video_files_size_in_mb" in dataset.meta.info:
         dataset.meta.info["video_files_size_in_mb"] = _ONE_EPISODE_PER_FILE
+    encoder = _EpisodeVideoEncoder.replacing(getattr(dataset, "_streaming_encoder", None))
+    if encoder is not None:
+        dataset._streaming_encoder = encoder
     save_kwargs = (
         {"parallel_encoding": False}
         if "parallel_encoding" in inspect.signature(dataset.save_episode).parameters
@@ -578,30 +816,44 @@ def write_lerobot(
             text = str(ep["language_instruction"]).strip()
             if text:
                 last_task = text
-            rgb, proprio, action = ep["rgb"], ep["proprio"], ep["action"]
-            reward = ep["reward"].reshape(-1, 1).astype(np.float32, copy=False)
-            success = ep["success"].reshape(-1, 1).astype(bool)
-            done = ep["done"].reshape(-1, 1).astype(bool)
-            for t in range(int(ep["episode_length"])):
-                dataset.add_frame(
-                    {
-                        TOP_KEY: rgb[t, :, :, 0:3],
-                        WRIST_KEY: rgb[t, :, :, 3:6],
-                        STATE_KEY: proprio[t],
-                        ACTION_KEY: action[t],
-                        REWARD_KEY: reward[t],
-                        SUCCESS_KEY: success[t],
-                        DONE_KEY: done[t],
-                        "task": last_task,
-                    }
+            length = int(ep["episode_length"])
+            columns = {
+                STATE_KEY: ep["proprio"][:length],
+                ACTION_KEY: ep["action"][:length],
+                REWARD_KEY: ep["reward"][:length].reshape(-1, 1).astype(np.float32, copy=False),
+                SUCCESS_KEY: ep["success"][:length].reshape(-1, 1).astype(bool),
+                DONE_KEY: ep["done"][:length].reshape(-1, 1).astype(bool),
+            }
+            cameras = {TOP_KEY: ep["rgb"][:length, :, :, 0:3], WRIST_KEY: ep["rgb"][:length, :, :, 3:6]}
+            if encoder is not None:
+                # The whole episode in one call (lerobot's ``save_episode(episode_data)``):
+                # the frame buffer is what ``add_frame`` builds, the videos are encoded here.
+                buffer = dataset.create_episode_buffer()
+                buffer.update(columns)
+                buffer.update(
+                    size=length,
+                    task=[last_task] * length,
+                    frame_index=np.arange(length),
+                    timestamp=np.arange(length) / fps,
                 )
-            dataset.save_episode(**save_kwargs)
+                encoder.start_episode(list(cameras), dataset.root)
+                for key, frames in cameras.items():
+                    buffer[key] = [None] * length  # video frames live in the encoder
+                    encoder.feed_frames(key, frames)
+                dataset.save_episode(episode_data=buffer, **save_kwargs)
+            else:
+                for t in range(length):
+                    frame = {key: value[t] for key, value in {**cameras, **columns}.items()}
+                    dataset.add_frame({**frame, "task": last_task})
+                dataset.save_episode(**save_kwargs)
             n_eps += 1
             n_frames += int(ep["episode_length"])
             if progress is not None:
                 progress(n_eps)
         completed = True
     finally:
+        if encoder is not None:
+            encoder.close()  # while FFmpeg is quiet: x264 reports when an encoder ends
         fixes.close()
         if caching:
             datasets.enable_caching()
