@@ -156,6 +156,46 @@ else:
             decoded = tf.io.decode_png(rlds.encode_png(image)).numpy()
             assert np.array_equal(decoded, image)
 
+    def test_png_decoder_equals_pil(tmp_path: Path) -> None:
+        """Our PNGs ("Sub" rows; with some rows "None") are decoded here; PNGs with other
+        filters (PIL's adaptive ones) and other colour types go to PIL; a corrupt one is
+        an error."""
+        import io
+        import struct
+        import zlib
+
+        from PIL import Image
+
+        rng = np.random.default_rng(4)
+        images = rng.integers(0, 256, size=(3, 16, 20, 3), dtype=np.uint8)
+        images[1] //= 16  # smooth enough for PIL's encoder to pick other filters
+        ours = [rlds.encode_png(image) for image in images]
+        assert np.array_equal(rlds.decode_pngs(ours), images)
+        rows, _, _ = rlds._png_rows(ours[0])
+        none_rows = bytearray(rows.tobytes())
+        for r in range(0, 16, 2):  # filter byte 0 and the raw pixels on even rows
+            start = r * rows.shape[1]
+            none_rows[start : start + rows.shape[1]] = b"\x00" + images[0, r].tobytes()
+        idat = zlib.compress(bytes(none_rows))
+        mixed = ours[0][:33] + struct.pack(">I", len(idat)) + b"IDAT" + idat
+        mixed += struct.pack(">I", zlib.crc32(b"IDAT" + idat)) + ours[0][-12:]
+        assert np.array_equal(rlds.decode_pngs([mixed])[0], images[0])
+
+        def pil_png(image: np.ndarray, mode: str = "RGB") -> bytes:
+            buffer = io.BytesIO()
+            Image.fromarray(image).convert(mode).save(buffer, format="PNG")
+            return buffer.getvalue()
+
+        theirs = [pil_png(image) for image in images]
+        assert any(rlds._png_rows(p)[0][:, 0].max() > 1 for p in theirs)
+        assert np.array_equal(rlds.decode_pngs(theirs), images)
+        rgba = rlds.decode_pngs([pil_png(images[2], "RGBA")])
+        assert rgba.shape == (1, 16, 20, 4) and np.array_equal(rgba[0, ..., :3], images[2])
+        broken = bytearray(ours[2])
+        broken[40] ^= 0xFF  # inside IDAT
+        with pytest.raises(ValueError, match="CRC"):
+            rlds.decode_pngs([bytes(broken)])
+
     def test_existing_output_needs_overwrite_or_resume(
         npz_task: Path, converted: rlds.ConversionResult
     ) -> None:

@@ -44,6 +44,7 @@ TFDS serialises the current one (the deflate releases the GIL).
 from __future__ import annotations
 
 import functools
+import io
 import json
 import os
 import shutil
@@ -213,6 +214,74 @@ def encode_png(image: np.ndarray) -> bytes:
     return _PNG_SIGNATURE + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
 
 
+def _inflater() -> Callable[[bytes], bytes]:
+    """zlib-stream decompression for PNG's IDAT: ISA-L where installed (~3x zlib's speed
+    on these images), else zlib; both check the stream's Adler-32."""
+    try:
+        from isal import isal_zlib
+    except ImportError:
+        return zlib.decompress
+    return isal_zlib.decompress
+
+
+_inflate = _inflater()
+
+
+def _png_rows(data: bytes) -> tuple[np.ndarray, int, int] | None:
+    """(filtered rows [H, W*3 + 1], H, W) of an 8-bit RGB non-interlaced PNG, chunk CRCs
+    checked; None for any other kind of PNG (left to PIL)."""
+    if data[:8] != _PNG_SIGNATURE:
+        raise ValueError("not a PNG image (bad signature)")
+    pos, header, idat = 8, None, []
+    while pos + 8 <= len(data):
+        (length,), kind = struct.unpack_from(">I", data, pos), data[pos + 4 : pos + 8]
+        body = data[pos + 8 : pos + 8 + length]
+        (crc,) = struct.unpack_from(">I", data, pos + 8 + length)
+        if len(body) != length or zlib.crc32(kind + body) != crc:
+            raise ValueError(f"corrupt PNG: chunk {kind!r} is cut or fails its CRC")
+        if kind == b"IHDR":
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat.append(body)
+        elif kind == b"IEND":
+            break
+        pos += 12 + length
+    if header is None or not idat:
+        raise ValueError("corrupt PNG: no IHDR or IDAT chunk")
+    w, h, depth, colour, _, _, interlace = header
+    if (depth, colour, interlace) != (8, 2, 0):
+        return None
+    raw = _inflate(b"".join(idat))
+    if len(raw) != h * (w * 3 + 1):
+        raise ValueError(f"corrupt PNG: {len(raw)} bytes of pixel data for {w}x{h} RGB")
+    return np.frombuffer(raw, np.uint8).reshape(h, w * 3 + 1), h, w
+
+
+def decode_pngs(images: list[bytes]) -> np.ndarray:
+    """Decode PNG images of one size into a [N, H, W, C] uint8 array.
+
+    8-bit RGB images whose rows use PNG's "None" or "Sub" filter (what `encode_png`
+    writes) are decoded here, the "Sub" rows as a running sum along the row (uint8
+    addition wraps mod 256, as PNG's does): ~4x faster than PIL. Any other PNG (other
+    filters, bit depths, colour types, interlacing) is decoded by PIL.
+    """
+    from PIL import Image
+
+    out = []
+    for data in images:
+        parsed = _png_rows(bytes(data))
+        filters = None if parsed is None else parsed[0][:, 0]
+        if parsed is None or np.any(filters > 1):
+            with Image.open(io.BytesIO(data)) as image:
+                out.append(np.asarray(image))
+            continue
+        rows, h, w = parsed
+        pixels = rows[:, 1:].reshape(h, w, 3)
+        summed = np.cumsum(pixels, axis=1, dtype=np.uint8)
+        out.append(summed if filters.all() else np.where(filters[:, None, None] == 1, summed, pixels))
+    return np.stack(out) if out else np.zeros((0, *IMAGE_SHAPE), np.uint8)
+
+
 # --------------------------------------------------------------------------- episode <-> example
 def _split_cameras(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The top and wrist frames of a [T, H, W, 6] array, each contiguous [T, H, W, 3].
@@ -220,6 +289,17 @@ def _split_cameras(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pixels = np.ascontiguousarray(rgb).view(np.dtype((np.void, 3)))  # [T, H, W, 2]
     shape = (*rgb.shape[:3], 3)
     return tuple(np.ascontiguousarray(pixels[..., c]).view(np.uint8).reshape(shape) for c in (0, 1))
+
+
+def _join_cameras(top: np.ndarray, wrist: np.ndarray) -> np.ndarray:
+    """The [T, H, W, 6] array of two [T, H, W, 3] uint8 camera arrays (`_split_cameras`
+    undone), copied as 3-byte pixels: ~3x faster than concatenating along the channels."""
+    top, wrist = (np.ascontiguousarray(a, dtype=np.uint8) for a in (top, wrist))
+    pixel = np.dtype((np.void, 3))
+    joined = np.empty((*top.shape[:3], 2), dtype=pixel)
+    joined[..., 0] = top.view(pixel)[..., 0]
+    joined[..., 1] = wrist.view(pixel)[..., 0]
+    return joined.view(np.uint8).reshape(*top.shape[:3], 6)
 
 
 def episode_to_rlds(
@@ -268,9 +348,7 @@ def episode_from_rlds(
     text = _text(instructions[0]) if len(instructions) else ""
     t = len(steps["reward"])
     return {
-        "rgb": np.concatenate([obs["image"], obs["wrist_image"]], axis=-1).astype(
-            np.uint8, copy=False
-        ),
+        "rgb": _join_cameras(obs["image"], obs["wrist_image"]),
         "proprio": np.asarray(obs["proprio"], dtype=np.float32),
         "action": np.asarray(steps["action"], dtype=np.float32),
         "reward": np.asarray(steps["reward"], dtype=np.float32),
@@ -555,6 +633,9 @@ def iter_examples(
         raise DatasetFormatError(vdir / "features.json", f"cannot be loaded: {exc}") from exc
     steps_feature = features["steps"]
     meta_feature = features["episode_metadata"]
+    png_keys = _png_observation_keys(steps_feature)
+    # PNG observations are decoded by `decode_pngs`, a whole episode at once.
+    decoders = {"steps": {"observation": {k: tfds.decode.SkipDecoding() for k in png_keys}}}
     if stop is not None and stop <= start:
         return
     shards = shard_files(vdir)
@@ -571,14 +652,37 @@ def iter_examples(
         first += length
         for raw in read_tfrecords(shard, skip, take):
             try:
-                example = features.deserialize_example_np(raw)
-                steps = _stack_steps(list(example["steps"]), steps_feature)
+                example = features.deserialize_example_np(raw, decoders=decoders)
+                step_list = list(example["steps"])
+                images = {
+                    k: decode_pngs([step["observation"].pop(k) for step in step_list])
+                    for k in png_keys
+                }
+                steps = _stack_steps(step_list, steps_feature)
+                steps["observation"].update(images)
                 metadata = {k: example["episode_metadata"][k] for k in meta_feature.keys()}
             except Exception as exc:
                 raise DatasetFormatError(
                     shard, f"record does not match features.json: {exc}"
                 ) from exc
             yield shard, steps, metadata
+
+
+def _png_observation_keys(steps_feature: Any) -> list[str]:
+    """The step observations stored as uint8 PNG images."""
+    tfds = _tfds()
+    try:
+        observation = steps_feature.feature["observation"]
+        keys = list(observation.keys())
+    except (AttributeError, KeyError, TypeError):
+        return []
+    return [
+        k
+        for k in keys
+        if isinstance(observation[k], tfds.features.Image)
+        and observation[k].encoding_format in (None, "png")
+        and observation[k].np_dtype == np.uint8
+    ]
 
 
 _TFRECORD_MASK_DELTA = 0xA282EAD8
