@@ -1136,9 +1136,12 @@ def _aggregate(parts: list[Path], part_ids: list[str], root: Path, repo_id: str)
     `VIDEO_FILE_SIZE_IN_MB` afterwards. Frame tables are joined as lerobot does (their
     indices change)."""
     from lerobot.datasets import aggregate
+    from lerobot.datasets import lerobot_dataset as lerobot_module
 
     original_tqdm = aggregate.tqdm.tqdm
     aggregate.tqdm.tqdm = functools.partial(original_tqdm, disable=True)
+    original_load_episodes = lerobot_module.load_episodes
+    lerobot_module.load_episodes = _load_episodes_without_stats
     loud_libav = _quiet_libav()
     try:
         aggregate.aggregate_datasets(
@@ -1150,12 +1153,29 @@ def _aggregate(parts: list[Path], part_ids: list[str], root: Path, repo_id: str)
         )
     finally:
         aggregate.tqdm.tqdm = original_tqdm
+        lerobot_module.load_episodes = original_load_episodes
         loud_libav()
     from lerobot.datasets.utils import write_info
 
     info = read_info(root)
     info["video_files_size_in_mb"] = VIDEO_FILE_SIZE_IN_MB
     write_info(info, root)
+
+
+def _load_episodes_without_stats(root: Path) -> Any:
+    """lerobot's ``load_episodes`` (the episode table without its ``stats/`` columns, as a
+    ``datasets.Dataset``), read in memory with pyarrow: lerobot's goes through
+    ``Dataset.from_parquet``, which prepares an Arrow cache and checks every nested stats
+    feature first, ~0.6 s per dataset here (three quarters of an aggregation)."""
+    import datasets
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    paths = sorted((Path(root) / "meta" / "episodes").glob("*/*.parquet"))
+    if not paths:
+        raise FileNotFoundError(f"no episode metadata parquet files in {root}/meta/episodes")
+    columns = [n for n in pq.read_schema(paths[0]).names if not n.startswith("stats/")]
+    return datasets.Dataset(pa.concat_tables([pq.read_table(p, columns=columns) for p in paths]))
 
 
 def _convert(
