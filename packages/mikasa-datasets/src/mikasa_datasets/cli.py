@@ -106,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--vcodec",
         default="h264",
-        help="video codec, one lerobot accepts: h264 (libx264, crf 23, ultrafast), libsvtav1 "
+        help="video codec, one lerobot accepts: h264 (libx264, qp 23, ultrafast), libsvtav1 "
         "(AV1, lerobot's default), hevc (default: %(default)s)",
     )
     p.add_argument(

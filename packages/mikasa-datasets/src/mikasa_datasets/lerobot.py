@@ -1,12 +1,12 @@
 """RLDS -> LeRobotDataset v3 and NPZ -> LeRobotDataset v3 export, and LeRobot reading
 (datasets spec §7).
 
-Writing goes through lerobot's own API (``LeRobotDataset.create`` / ``add_frame`` /
-``save_episode`` / ``finalize``, lerobot 0.4.x), so the result is exactly what lerobot
-produces: ``meta/info.json`` (``codebase_version`` v3.0), ``meta/stats.json``,
-``meta/tasks.parquet``, ``meta/episodes/...``, ``data/chunk-XXX/file-XXX.parquet`` and one
-MP4 stream per camera under ``videos/``. It loads offline with
-``LeRobotDataset(repo_id, root=<dataset root>)``.
+Writing goes through lerobot's own API (``LeRobotDataset.create`` / ``save_episode`` with
+each whole episode / ``finalize``, and ``aggregate_datasets`` joining parallel writers;
+lerobot 0.4.x), so the result is what lerobot produces: ``meta/info.json``
+(``codebase_version`` v3.0), ``meta/stats.json``, ``meta/tasks.parquet``,
+``meta/episodes/...``, ``data/chunk-XXX/file-XXX.parquet`` and one MP4 stream per camera
+under ``videos/``. It loads offline with ``LeRobotDataset(repo_id, root=<dataset root>)``.
 
 Features (spec §7.2, plus the outcome columns, see below)::
 
@@ -24,14 +24,15 @@ write reward, success and done under LeRobot's conventional ``next.*`` names so 
 LeRobot release is self-contained (RL fine-tuning and success filtering need them) and
 round-trips exactly. Consumers that read only the upstream four features are unaffected.
 
-Videos: codec pinned to H.264 (libx264, crf 23, preset ultrafast, yuv420p, GOP 2; see
-`H264_OPTIONS` for why not lerobot's default AV1; ``vcodec="libsvtav1"`` gives AV1),
-encoded while frames are added (lerobot's streaming encoder, with a queue large enough
-that no frame is ever dropped). Video is lossy: frames come back within a PSNR tolerance
-(>= 30 dB on rendered scenes; the tests assert it), everything else is exact. ``fps``
-defaults to 10 (spec §7.1). The source ``metadata.json`` (NPZ or RLDS, same content) is
-copied to ``<dataset root>/source_rlds_metadata.json``; the loader takes episode seeds
-and ``success_once`` from it.
+Videos: codec pinned to H.264 (libx264, constant quantiser 23, preset ultrafast, yuv420p,
+GOP 2; see `H264_OPTIONS` for why not lerobot's default AV1; ``vcodec="libsvtav1"`` gives
+AV1), encoded by `_EpisodeVideoEncoder` in place of lerobot's streaming encoder (one
+encoder per camera for the whole write, one file per episode). Video is lossy: frames
+come back within a PSNR tolerance (>= 30 dB on rendered scenes; the tests assert it),
+everything else is exact. ``fps`` defaults to 10 (spec §7.1). The source
+``metadata.json`` (NPZ or RLDS, same content) is copied to
+``<dataset root>/source_rlds_metadata.json``; the loader takes episode seeds and
+``success_once`` from it.
 
 Fixes to lerobot 0.4.4's writer apply while we write (`_lerobot_writer_fixes`, restored
 after): image statistics computed from each frame's value counts, which is right where
@@ -39,8 +40,9 @@ lerobot's uint8 arithmetic wrapped (stats.json had a wrong image std; upstream f
 later, huggingface/lerobot#3697) and ~15x cheaper than its per-pixel histogram update; the
 other per-episode statistics with their per-channel loops vectorised (same numbers);
 ``embed_images``, a no-op for video features, skipped; random fingerprints for lerobot's
-per-episode ``datasets`` tables; the pinned H.264 options; FFmpeg's info logging off.
-Episode videos are written one file each and joined once at the end
+per-episode ``datasets`` tables; the pinned H.264 options; FFmpeg's info logging off;
+``meta/info.json`` and ``meta/stats.json`` written once at the end instead of after every
+episode. Episode videos are written one file each and joined once at the end
 (`join_episode_videos`) instead of lerobot's per-episode re-mux of the growing file, and
 large conversions run in several writer processes joined by lerobot's aggregation
 (`writer_count`). Measured figures: the package README.
@@ -463,7 +465,42 @@ def _apply_writer_fixes() -> list[Callable[[], None]]:
         _pin_h264_options(),
         _quiet_libav(),
         _random_dataset_fingerprints(),
+        _defer_metadata_writes(lerobot_module),
     ]
+
+
+_PENDING_WRITES: dict[tuple[str, str], tuple[Callable[..., None], Any]] = {}
+
+
+def _defer_metadata_writes(lerobot_module: Any) -> Callable[[], None]:
+    """lerobot rewrites ``meta/info.json`` and ``meta/stats.json`` after every episode (the
+    whole aggregated statistics as JSON, ~2 ms an episode); while we write, each write only
+    records the latest content per file, and `_flush_metadata_writes` (at the end of a
+    write, and in the undo) writes it once. Return the undo."""
+    originals = {name: getattr(lerobot_module, name) for name in ("write_info", "write_stats")}
+
+    def deferred(name: str) -> Callable[[Any, Path], None]:
+        def record(content: Any, root: Path) -> None:
+            _PENDING_WRITES[(str(root), name)] = (originals[name], content)
+
+        return record
+
+    for name in originals:
+        setattr(lerobot_module, name, deferred(name))
+
+    def undo() -> None:
+        for name, original in originals.items():
+            setattr(lerobot_module, name, original)
+        _flush_metadata_writes()
+
+    return undo
+
+
+def _flush_metadata_writes(root: str | os.PathLike[str] | None = None) -> None:
+    """Write the deferred metadata of ``root`` (default: of every dataset)."""
+    for key in [k for k in _PENDING_WRITES if root is None or k[0] == str(root)]:
+        write, content = _PENDING_WRITES.pop(key)
+        write(content, Path(key[0]))
 
 
 def _random_dataset_fingerprints() -> Callable[[], None]:
@@ -850,6 +887,7 @@ def write_lerobot(
             n_frames += int(ep["episode_length"])
             if progress is not None:
                 progress(n_eps)
+        _flush_metadata_writes(dataset.root)
         completed = True
     finally:
         if encoder is not None:
