@@ -265,13 +265,25 @@ def _adjust_histograms(stats: Any) -> None:
         stats._bin_edges[i] = new_edges
 
 
+def _value_counts(rows: np.ndarray) -> np.ndarray:
+    """[C, 256] counts of each value 0..255 per channel of uint8 ``rows`` [N, C]. RGB rows
+    are counted by PIL's histogram (one pass in C; ~30% faster than three bincounts)."""
+    n, channels = rows.shape
+    if channels == 3 and n > 0:
+        from PIL import Image
+
+        image = Image.frombuffer("RGB", (n, 1), np.ascontiguousarray(rows), "raw", "RGB", 0, 1)
+        return np.asarray(image.histogram(), dtype=np.int64).reshape(3, 256)
+    return np.stack([np.bincount(rows[:, c], minlength=256) for c in range(channels)])
+
+
 def _update_from_value_counts(stats: Any, rows: np.ndarray) -> None:
     """``RunningQuantileStats.update`` for uint8 ``rows`` [N, C], computed from each
     channel's 256 value counts: the state lerobot's update reaches on the rows promoted to
     floats (mean and mean of squares exact, in float64; the same histogram bins and
     counts), in a fraction of the time."""
     n, channels = rows.shape
-    counts = np.stack([np.bincount(rows[:, c], minlength=256) for c in range(channels)])
+    counts = _value_counts(rows)
     present = counts > 0
     batch_min = _PIXEL_VALUES[present.argmax(axis=1)]
     batch_max = _PIXEL_VALUES[255 - present[:, ::-1].argmax(axis=1)]
