@@ -577,9 +577,11 @@ class _EpisodeVideoEncoder:
     Other codecs (AV1 has a delay) get a new encoder per episode, as in lerobot.
     """
 
-    PERSISTENT_H264_OPTIONS = {"tune": "zerolatency", "forced-idr": "1"}
+    PERSISTENT_H264_OPTIONS = {"tune": "zerolatency", "forced-idr": "1", "threads": "1"}
     """Added to the H.264 options of the persistent encoders: no lookahead or frame
-    threads (no frame held back), and a requested keyframe is an IDR frame."""
+    threads (no frame held back); a requested keyframe is an IDR frame; one thread, so the
+    video does not depend on the machine's core count (x264's threads change the bitstream;
+    parallelism comes from the writer processes, one per core)."""
 
     def __init__(
         self,
@@ -830,8 +832,8 @@ def write_lerobot(
         # must never fill up: lerobot drops frames (with a warning) when it does.
         kwargs.update(streaming_encoding=True, encoder_queue_maxsize=1_000_000)
         if "encoder_threads" in supported:
-            # Two camera encoders run side by side; one SVT-AV1 thread pool each avoids
-            # oversubscribing small machines.
+            # Used by encoders other than our persistent H.264 ones (one thread): two
+            # cameras' worth of encoder threads, half the cores each.
             kwargs["encoder_threads"] = max(1, (os.cpu_count() or 2) // 2)
     dataset = cls.create(**{k: v for k, v in kwargs.items() if k in supported})
     if "video_files_size_in_mb" in dataset.meta.info:
