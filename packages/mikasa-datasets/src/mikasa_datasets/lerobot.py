@@ -69,6 +69,7 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -123,6 +124,8 @@ camera for a whole write (`_EpisodeVideoEncoder`) an episode's video would depen
 episodes encoded before it; at a constant quantiser it depends on its own frames only, and
 a conversion gives the same frames for any number of writers. GOP 2 and yuv420p stay
 lerobot's."""
+H264_CODECS = ("h264", "libx264")
+"""Codec names that select libx264 (and `H264_OPTIONS`)."""
 SOURCE_METADATA_NAME = "source_rlds_metadata.json"
 
 TOP_KEY = "observation.images.top"
@@ -543,7 +546,7 @@ def _pin_h264_options() -> Callable[[], None]:
     @functools.wraps(original)
     def codec_options(vcodec: str, *args: Any, **kwargs: Any) -> dict:
         options = original(vcodec, *args, **kwargs)
-        if vcodec in ("h264", "libx264"):
+        if vcodec in H264_CODECS:
             _pin_h264(options)
         return options
 
@@ -596,9 +599,8 @@ class _EpisodeVideoEncoder:
         from lerobot.datasets import video_utils
 
         self.fps, self.vcodec, self.pix_fmt = fps, vcodec, pix_fmt
+        self.time_base = Fraction(1, fps)  # of frames; the muxer changes the stream's
         self.options = video_utils._get_codec_options(vcodec, g, crf, preset)
-        if vcodec in ("h264", "libx264"):
-            _pin_h264(self.options)
         if encoder_threads is not None:
             if vcodec == "libsvtav1":
                 params = self.options.get("svtav1-params")
@@ -606,8 +608,9 @@ class _EpisodeVideoEncoder:
                 self.options["svtav1-params"] = f"{params}:{lp}" if params else lp
             else:
                 self.options["threads"] = str(encoder_threads)
-        self.persistent = vcodec in ("h264", "libx264")
+        self.persistent = vcodec in H264_CODECS
         if self.persistent:
+            _pin_h264(self.options)
             self.options.update(self.PERSISTENT_H264_OPTIONS)
         self._encoders: dict[str, dict[str, Any]] = {}  # camera -> persistent encoder
         self._dir: Path | None = None
@@ -651,7 +654,7 @@ class _EpisodeVideoEncoder:
         encoder, stream, container = camera["encoder"], camera["stream"], camera["container"]
         for frame in frames:
             video_frame = av.VideoFrame.from_numpy_buffer(frame, format="rgb24")
-            video_frame.time_base = self._time_base  # the muxer changes the stream's
+            video_frame.time_base = self.time_base
             if encoder is None:  # an encoder of this episode's file
                 video_frame.pts = camera["count"]
                 container.mux(stream.encode(video_frame))
@@ -664,12 +667,6 @@ class _EpisodeVideoEncoder:
                 self._mux(camera, packets)
             _update_from_value_counts(camera["stats"], frame.reshape(-1, 3))
             camera["count"] += 1
-
-    @property
-    def _time_base(self) -> Any:
-        from fractions import Fraction
-
-        return Fraction(1, self.fps)
 
     def _open(self, video_key: str, height: int, width: int) -> dict[str, Any]:
         """The episode's file for ``video_key``, its stream, and the encoder feeding it."""
@@ -687,7 +684,7 @@ class _EpisodeVideoEncoder:
                 encoder = self._encoders[video_key] = self._persistent_encoder(height, width)
             stream = container.add_stream_from_template(encoder["template"], opaque=True)
             stream.codec_context.extradata = encoder["codec"].extradata
-            stream.time_base = self._time_base
+            stream.time_base = self.time_base
         else:
             stream = self._add_stream(container, height, width)
         camera = self._cameras[video_key]
@@ -701,7 +698,7 @@ class _EpisodeVideoEncoder:
     def _add_stream(self, container: Any, height: int, width: int) -> Any:
         stream = container.add_stream(self.vcodec, self.fps, options=dict(self.options))
         stream.pix_fmt, stream.height, stream.width = self.pix_fmt, height, width
-        stream.time_base = self._time_base
+        stream.time_base = self.time_base
         return stream
 
     def _persistent_encoder(self, height: int, width: int) -> dict[str, Any]:
@@ -717,14 +714,14 @@ class _EpisodeVideoEncoder:
         with av.open(buffer, "w", format="mp4") as container:
             stream = self._add_stream(container, height, width)
             frame = av.VideoFrame.from_ndarray(np.zeros((height, width, 3), np.uint8), "rgb24")
-            frame.pts, frame.time_base = 0, self._time_base
+            frame.pts, frame.time_base = 0, self.time_base
             container.mux(stream.encode(frame))
             container.mux(stream.encode())
         buffer.seek(0)
         template = av.open(buffer)
         codec = av.CodecContext.create(self.vcodec, "w")
         codec.width, codec.height, codec.pix_fmt = width, height, self.pix_fmt
-        codec.time_base, codec.framerate = self._time_base, self.fps
+        codec.time_base, codec.framerate = self.time_base, self.fps
         codec.options = dict(self.options)
         codec.flags |= av.codec.context.Flags.global_header
         codec.open()
