@@ -1,0 +1,99 @@
+"""The manifest of the 32 RL tasks (the original MIKASA-Robo RL release).
+
+Plain data (``data/tasks.csv``), no simulator import: each row gives the id, its group and
+the MIKASA-Robo-VLA family it is built on, the RL paper's memory type (4-type taxonomy),
+the horizon, the privileged ``oracle_info`` and ``task_cue`` names of the paper's Table 1,
+the divisor of the normalised dense reward and the VLA env it is a variant of.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+
+from mikasa_envs.manifest import UnknownEnvIdError
+
+MEMORY_TYPES: tuple[str, ...] = ("Object", "Spatial", "Sequential", "Capacity")
+
+
+@dataclass(frozen=True)
+class RLTaskSpec:
+    """One RL manifest row; ``task_cue`` is ``None`` for tasks without a cue vector."""
+
+    env_id: str
+    group: str
+    family: str
+    memory_type: str
+    max_episode_steps: int
+    oracle_info: str
+    task_cue: str | None
+    reward_divisor: float
+    vla_env_id: str
+
+
+@cache
+def _all_tasks() -> tuple[RLTaskSpec, ...]:
+    text = resources.files("mikasa_robo_rl").joinpath("data", "tasks.csv").read_text(encoding="utf-8")
+    return tuple(
+        RLTaskSpec(
+            env_id=row["env_id"],
+            group=row["group"],
+            family=row["family"],
+            memory_type=row["memory_type"],
+            max_episode_steps=int(row["max_episode_steps"]),
+            oracle_info=row["oracle_info"],
+            task_cue=row["task_cue"] or None,
+            reward_divisor=float(row["reward_divisor"]),
+            vla_env_id=row["vla_env_id"],
+        )
+        for row in csv.DictReader(text.splitlines())
+    )
+
+
+@cache
+def _by_id() -> dict[str, RLTaskSpec]:
+    return {t.env_id: t for t in _all_tasks()}
+
+
+def rl_env_ids() -> tuple[str, ...]:
+    """The 32 RL env ids in the release's order."""
+    return tuple(t.env_id for t in _all_tasks())
+
+
+def groups() -> tuple[str, ...]:
+    """The 12 task groups, in manifest order."""
+    return tuple(dict.fromkeys(t.group for t in _all_tasks()))
+
+
+def list_rl_tasks(group: str | None = None, memory_type: str | None = None) -> list[RLTaskSpec]:
+    """RL tasks in manifest order, filtered by ``group`` and/or ``memory_type``."""
+    for name, value, accepted in (("group", group, groups()), ("memory type", memory_type, MEMORY_TYPES)):
+        if value is not None and value not in accepted:
+            raise ValueError(f"unknown {name} {value!r}; accepted values: {', '.join(accepted)}")
+    return [
+        t
+        for t in _all_tasks()
+        if (group is None or t.group == group) and (memory_type is None or t.memory_type == memory_type)
+    ]
+
+
+def unknown_rl_env_message(env_id: str) -> str:
+    """The release's "Unknown environment" message, naming the closest RL ids."""
+    close = difflib.get_close_matches(str(env_id), rl_env_ids(), n=3, cutoff=0.6)
+    hint = f" Did you mean: {', '.join(close)}?" if close else ""
+    return (
+        f"Unknown environment: {env_id!r}.{hint} The RL release has {len(rl_env_ids())} ids "
+        "(mikasa_robo_rl.rl_env_ids()); VLA ids (<Name>-VLA-v0) belong to mikasa_envs."
+    )
+
+
+def get_rl_task(env_id: str) -> RLTaskSpec:
+    """The manifest row of ``env_id``; ``UnknownEnvIdError`` (a ValueError) naming close
+    matches if unknown."""
+    try:
+        return _by_id()[env_id]
+    except (KeyError, TypeError):
+        raise UnknownEnvIdError(unknown_rl_env_message(env_id)) from None

@@ -1,0 +1,1 @@
+"""Old dataset-collector package of the RL release."""

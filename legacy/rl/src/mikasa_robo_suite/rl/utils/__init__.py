@@ -1,0 +1,1 @@
+"""Old utilities package of the RL release (1.0.0 wheel)."""

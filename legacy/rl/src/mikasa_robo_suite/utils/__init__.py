@@ -1,0 +1,1 @@
+"""Old utilities package of the RL release."""
