@@ -2,12 +2,14 @@
 
 Steps/s is the best of three timed blocks (zero actions, from the second step after a
 seeded reset). Each (env id, obs mode) is measured in a fresh subprocess so its peak memory (max RSS) is
-its own. rgb runs go through the canonical wrapper chain; state runs use the raw env (the
-chain needs camera images). A bare ManiSkill ``PickCube-v1`` with ``panda_wristcam`` and
-the same two 128x128 cameras is measured in the same run for comparison.
+its own. rgb runs go through the canonical wrapper chain (RL ids: the RL chain in
+``rgb_joints`` mode, ``pd_joint_delta_pos``); state runs use the raw env (the chain needs
+camera images). A bare ManiSkill ``PickCube-v1`` with ``panda_wristcam`` and the same two
+128x128 cameras is measured in the same run for comparison.
 
-    python benchmarks/env_throughput.py                      # every registered id
+    python benchmarks/env_throughput.py                      # every registered VLA id
     python benchmarks/env_throughput.py --env-ids RememberColor3-VLA-v0 --rgb-steps 30
+    python benchmarks/env_throughput.py --suite rl           # the 32 RL ids, each next to its VLA id
     python benchmarks/env_throughput.py --json results/env_throughput.json
 
 Reference (published implementation, this 2-core machine, CPU PhysX + lavapipe): median
@@ -38,13 +40,19 @@ def measure(env_id: str, obs_mode: str, steps: int) -> dict:
     import mikasa_envs  # noqa: F401
     import numpy as np
 
-    kwargs = dict(obs_mode=obs_mode, control_mode="pd_ee_delta_pose", sim_backend="cpu")
+    rl = is_rl_id(env_id)
+    control_mode = "pd_joint_delta_pos" if rl else "pd_ee_delta_pose"
+    kwargs = dict(obs_mode=obs_mode, control_mode=control_mode, sim_backend="cpu")
     if env_id == BASELINE_ID:
         kwargs.update(robot_uids="panda_wristcam", sensor_configs=dict(width=128, height=128))
 
     def make():
         env = gym.make(env_id, **kwargs)
-        if obs_mode == "rgb" and env_id != BASELINE_ID:
+        if obs_mode == "rgb" and rl:
+            from mikasa_robo_rl.wrappers import apply_rl_wrappers
+
+            env = apply_rl_wrappers(env, "rgb_joints")
+        elif obs_mode == "rgb" and env_id != BASELINE_ID:
             from mikasa_wrappers import apply_mikasa_vla_wrappers
 
             env = apply_mikasa_vla_wrappers(env)
@@ -86,6 +94,15 @@ def measure(env_id: str, obs_mode: str, steps: int) -> dict:
     )
 
 
+def is_rl_id(env_id: str) -> bool:
+    """Whether ``env_id`` is one of the RL release's ids (mikasa-robo-rl)."""
+    try:
+        from mikasa_robo_rl import rl_env_ids
+    except ImportError:
+        return False
+    return env_id in rl_env_ids()
+
+
 def run_in_subprocess(env_id: str, obs_mode: str, steps: int) -> dict:
     """Measure one (env, mode) in a fresh interpreter and return its figures."""
     here = str(Path(__file__).parent)
@@ -103,12 +120,25 @@ def main() -> None:
     import mikasa_envs
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env-ids", default=None, help="comma-separated ids (default: every registered id)")
+    parser.add_argument("--env-ids", default=None, help="comma-separated ids (default: every id of --suite)")
+    parser.add_argument(
+        "--suite",
+        choices=("vla", "rl"),
+        default="vla",
+        help="vla: the registered VLA ids; rl: the 32 RL ids, each followed by its VLA counterpart",
+    )
     parser.add_argument("--rgb-steps", type=int, default=15, help="steps per timed block (3 blocks)")
     parser.add_argument("--state-steps", type=int, default=400, help="steps per timed block (3 blocks)")
     parser.add_argument("--json", default=None, help="write all figures to this JSON file")
     args = parser.parse_args()
-    env_ids = args.env_ids.split(",") if args.env_ids else mikasa_envs.registered_env_ids()
+    if args.env_ids:
+        env_ids = args.env_ids.split(",")
+    elif args.suite == "rl":
+        from mikasa_robo_rl import list_rl_tasks
+
+        env_ids = [i for t in list_rl_tasks() for i in (t.env_id, t.vla_env_id)]
+    else:
+        env_ids = mikasa_envs.registered_env_ids()
 
     rows = []
     for env_id in [BASELINE_ID, *env_ids]:
@@ -123,6 +153,7 @@ def main() -> None:
         )
 
     tasks = rows[1:]
+    rl_vs_vla = rl_ratios(rows)
     summary = dict(
         median_rgb_steps_per_s=statistics.median(r["steps_per_s"] for _, r, _ in tasks),
         median_state_steps_per_s=statistics.median(s["steps_per_s"] for _, _, s in tasks),
@@ -133,6 +164,7 @@ def main() -> None:
         max_peak_rgb_rss_mb=max(r["peak_rss_mb"] for _, r, _ in tasks),
         baseline=dict(rgb=rows[0][1], state=rows[0][2]),
         reference=REFERENCE,
+        rl_vs_vla=rl_vs_vla,
     )
     print()
     print(f"tasks measured: {len(tasks)}")
@@ -145,12 +177,34 @@ def main() -> None:
     print(f"warm make        median {summary['median_warm_make_s']:.3f} s (reference {REFERENCE['warm_make_s']})")
     print(f"peak memory, one rgb env process: max {summary['max_peak_rgb_rss_mb']:.0f} MB (target <= 1536)")
     print(f"bare {BASELINE_ID}: rgb {rows[0][1]['steps_per_s']:.2f} st/s, state {rows[0][2]['steps_per_s']:.1f} st/s")
+    if rl_vs_vla:
+        print("RL id vs its VLA id (steps/s ratio, >= 1: the RL id is at least as fast):")
+        for env_id, ratio in rl_vs_vla.items():
+            print(f"  {env_id:32s} rgb {ratio['rgb']:.2f}x  state {ratio['state']:.2f}x")
+        print(f"  min: rgb {min(r['rgb'] for r in rl_vs_vla.values()):.2f}x  state {min(r['state'] for r in rl_vs_vla.values()):.2f}x")
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")
         tmp.write_text(json.dumps(dict(rows=[dict(rgb=r, state=s) for _, r, s in rows], summary=summary), indent=2))
         tmp.replace(path)
+
+
+def rl_ratios(rows: list[tuple[str, dict, dict]]) -> dict[str, dict[str, float]]:
+    """For every measured RL id whose VLA counterpart was measured too, steps/s RL / VLA."""
+    if not any(is_rl_id(env_id) for env_id, _, _ in rows):
+        return {}
+    from mikasa_robo_rl import get_rl_task
+
+    by_id = {env_id: (rgb, state) for env_id, rgb, state in rows}
+    ratios = {}
+    for env_id, rgb, state in rows:
+        vla = by_id.get(get_rl_task(env_id).vla_env_id) if is_rl_id(env_id) else None
+        if vla is not None:
+            ratios[env_id] = dict(
+                rgb=rgb["steps_per_s"] / vla[0]["steps_per_s"], state=state["steps_per_s"] / vla[1]["steps_per_s"]
+            )
+    return ratios
 
 
 if __name__ == "__main__":
