@@ -270,7 +270,7 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
     from mikasa_oracles import collect as collect_module
 
     monkeypatch.setattr(collect_module, "_AttemptRunner", _FakeRunner)
-    monkeypatch.setattr(collect_module, "_ProcessPool", _LifoPool)
+    monkeypatch.setattr(collect_module, "ProcessPool", _LifoPool)
     serial = run(tmp_path / "serial", n=5)
     parallel = run(tmp_path / "parallel", n=5, workers=4)
     directory = tmp_path / "parallel" / "data" / "data_npz" / NAME

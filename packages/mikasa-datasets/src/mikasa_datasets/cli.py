@@ -9,6 +9,8 @@ Subcommands::
 Paths follow datasets spec §2: ``<root>/data_npz/<name>``, ``<root>/data_rlds/<name>/1.0.0``,
 ``<root>/data_lerobot/<repo id>`` with ``--root`` defaulting to ``data_mikasa_robo``. A
 task is given by env id or dataset name (normalised with ``env_id_to_dataset_name``).
+``validate`` also accepts the RL release's episodes (``mikasa-rl-collect``:
+``<path>/MIKASA-Robo/unbatched/<env_id>/`` or one of its files), told apart by their keys.
 
 Exit status: 0 success, 1 a conversion or validation failed (the message names the file),
 2 bad usage, 3 a format library is missing (the message says how to install it).
@@ -119,7 +121,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-videos", action="store_true", help="store camera frames as PNG images instead of MP4"
     )
 
-    p = sub.add_parser("validate", help="check a dataset (NPZ, RLDS or LeRobot) against the schema")
+    p = sub.add_parser(
+        "validate",
+        help="check a dataset (NPZ, RLDS or LeRobot; NPZ includes the RL release's "
+        "MIKASA-Robo/unbatched/<env_id> episodes) against the schema",
+    )
     p.add_argument(
         "paths",
         nargs="+",

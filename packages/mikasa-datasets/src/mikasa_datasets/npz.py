@@ -13,6 +13,11 @@ temporary file, which :func:`remove_stale_temp_files` deletes and every reader i
 Reading checks the archive against :data:`SCHEMA` (keys, dtypes, shapes, one common
 episode length) before any frame data is trusted; every problem raises
 :class:`EpisodeFormatError` whose message starts with the offending file's path.
+
+The RL release's episodes (``mikasa-rl-collect``) have their own, smaller schema,
+:data:`RL_SCHEMA` (``rgb``/``joints``/``action``/``reward``/``success``/``done``, every step
+to the timeout, no language or metadata): :func:`write_rl_episode`, :func:`read_rl_episode`
+and :func:`validate_rl_episode` are its writer, reader and checker.
 """
 
 from __future__ import annotations
@@ -45,6 +50,8 @@ __all__ = [
     "METADATA_KEYS",
     "PROPRIO_DIM",
     "RGB_CHANNELS",
+    "RL_EPISODE_KEYS",
+    "RL_SCHEMA",
     "SCHEMA",
     "STEP_KEYS",
     "Episode",
@@ -57,19 +64,24 @@ __all__ = [
     "check_schema",
     "episode_file_name",
     "episode_index",
+    "is_rl_episode_file",
     "is_temp_file",
     "list_episode_files",
     "make_episode",
     "read_episode",
     "read_episode_summary",
     "read_metadata",
+    "read_rl_episode",
+    "read_rl_episode_headers",
     "remove_stale_temp_files",
     "summarize_directory",
     "summarize_episode",
     "task_dir",
     "validate_episode",
+    "validate_rl_episode",
     "write_episode",
     "write_metadata",
+    "write_rl_episode",
 ]
 
 # --------------------------------------------------------------------------- layout
@@ -161,6 +173,40 @@ SCHEMA: dict[str, KeySpec] = {
 
 EPISODE_KEYS: tuple[str, ...] = tuple(SCHEMA)
 STEP_KEYS: tuple[str, ...] = tuple(k for k, s in SCHEMA.items() if s.per_step)
+
+RL_JOINTS_DIM = 25
+RL_ACTION_DIM = 8
+
+RL_SCHEMA: dict[str, KeySpec] = {
+    spec.name: spec
+    for spec in (
+        KeySpec(
+            "rgb",
+            np.dtype(np.uint8),
+            ("T", IMAGE_SIZE, IMAGE_SIZE, RGB_CHANNELS),
+            "channels 0-2 base_camera, 3-5 hand_camera; observation before step t",
+        ),
+        KeySpec(
+            "joints",
+            np.dtype(np.float32),
+            ("T", RL_JOINTS_DIM),
+            "[tcp_pose (x, y, z, qw, qx, qy, qz), qpos 9, qvel 9] before step t",
+        ),
+        KeySpec("action", np.dtype(np.float32), ("T", RL_ACTION_DIM), "pd_joint_delta_pos action"),
+        KeySpec("reward", np.dtype(np.float32), ("T",), "normalized_dense reward of step t"),
+        KeySpec("success", np.dtype(np.int64), ("T",), "info['success'] after step t (0/1)"),
+        KeySpec(
+            "done",
+            np.dtype(np.int64),
+            ("T",),
+            "terminated | truncated after step t, terminations ignored (1 only at T-1)",
+        ),
+    )
+}
+"""The RL release's episode files (``<path>/MIKASA-Robo/unbatched/<env_id>/train_data_<n>.npz``,
+written by ``mikasa-rl-collect``): every step up to the task's horizon, every episode kept,
+no language or metadata. Told apart from :data:`SCHEMA` by its key set."""
+RL_EPISODE_KEYS: tuple[str, ...] = tuple(RL_SCHEMA)
 
 METADATA_KEYS: tuple[str, ...] = (
     "env_id",
@@ -297,9 +343,15 @@ def _fsync_dir(directory: Path) -> None:
 
 
 # --------------------------------------------------------------------------- schema checks
-def _check_array(key: str, dtype: np.dtype, shape: tuple[int, ...], source: Any) -> int | None:
+def _check_array(
+    key: str,
+    dtype: np.dtype,
+    shape: tuple[int, ...],
+    source: Any,
+    schema: Mapping[str, KeySpec] = SCHEMA,
+) -> int | None:
     """Check one key's dtype/shape against the schema; return its ``T`` (if per step)."""
-    spec = SCHEMA[key]
+    spec = schema[key]
     if spec.dtype is None:
         if dtype.kind != "U":
             raise EpisodeFormatError(
@@ -318,19 +370,19 @@ def _check_array(key: str, dtype: np.dtype, shape: tuple[int, ...], source: Any)
     return int(shape[0]) if spec.per_step else None
 
 
-def _check_keys(keys: Sequence[str], source: Any) -> None:
-    missing = [k for k in EPISODE_KEYS if k not in keys]
+def _check_keys(keys: Sequence[str], source: Any, schema: Mapping[str, KeySpec] = SCHEMA) -> None:
+    missing = [k for k in schema if k not in keys]
     if missing:
         raise EpisodeFormatError(
             source,
-            f"missing key(s) {', '.join(map(repr, missing))}; an episode has {', '.join(EPISODE_KEYS)}",
+            f"missing key(s) {', '.join(map(repr, missing))}; an episode has {', '.join(schema)}",
         )
-    extra = sorted(k for k in keys if k not in SCHEMA)
+    extra = sorted(k for k in keys if k not in schema)
     if extra:
         raise EpisodeFormatError(source, f"unexpected key(s) {', '.join(map(repr, extra))}")
 
 
-def _check_lengths(lengths: Mapping[str, int], episode_length: int, source: Any) -> int:
+def _check_lengths(lengths: Mapping[str, int], episode_length: int | None, source: Any) -> int:
     distinct = set(lengths.values())
     if len(distinct) > 1:
         detail = ", ".join(f"{k}: {n}" for k, n in lengths.items())
@@ -338,7 +390,7 @@ def _check_lengths(lengths: Mapping[str, int], episode_length: int, source: Any)
             source, f"per-step arrays disagree on the episode length ({detail})"
         )
     t = distinct.pop()
-    if t != episode_length:
+    if episode_length is not None and t != episode_length:
         raise EpisodeFormatError(
             source, f"episode_length is {episode_length} but the per-step arrays have {t} steps"
         )
@@ -356,18 +408,23 @@ def check_schema(
     :func:`make_episode` to build an episode from raw rollout data). ``source`` names the
     episode in error messages.
     """
-    _check_keys(list(episode), source)
+    return _check_in_memory(episode, source, SCHEMA)
+
+
+def _check_in_memory(episode: Mapping[str, Any], source: Any, schema: Mapping[str, KeySpec]) -> int:
+    _check_keys(list(episode), source, schema)
     lengths: dict[str, int] = {}
-    for key in EPISODE_KEYS:
+    for key in schema:
         value = episode[key]
         if not isinstance(value, np.ndarray):
             raise EpisodeFormatError(
                 source, f"key {key!r} is a {type(value).__name__}, expected a numpy array"
             )
-        t = _check_array(key, value.dtype, value.shape, source)
+        t = _check_array(key, value.dtype, value.shape, source, schema)
         if t is not None:
             lengths[key] = t
-    return _check_lengths(lengths, int(episode["episode_length"]), source)
+    length = int(episode["episode_length"]) if "episode_length" in schema else None
+    return _check_lengths(lengths, length, source)
 
 
 def validate_episode(
@@ -428,6 +485,44 @@ def validate_episode(
     return t
 
 
+def validate_rl_episode(
+    episode: Mapping[str, Any],
+    *,
+    source: str | os.PathLike[str] | None = None,
+    max_episode_steps: int | None = None,
+) -> int:
+    """Check an RL episode (:data:`RL_SCHEMA`) and its invariants; return ``T``.
+
+    Invariants: one length ``T`` for every array; ``success``/``done`` are 0/1; ``done``
+    is 1 exactly at the last step (terminations are ignored: the episode runs to its
+    timeout); ``T <= max_episode_steps`` when given; float arrays are finite. Actions are
+    not range-checked (a policy's raw actions may leave [-1, 1]; the controller clips).
+    """
+    t = _check_in_memory(episode, source, RL_SCHEMA)
+
+    def fail(problem: str) -> None:
+        raise EpisodeInvariantError(source, problem)
+
+    done, success = episode["done"], episode["success"]
+    for key, arr in (("done", done), ("success", success)):
+        if not np.isin(arr, (0, 1)).all():
+            fail(f"{key} holds values other than 0/1: {sorted(set(np.unique(arr).tolist()))}")
+    if done[-1] != 1:
+        fail(f"done[T-1] is 0 (T = {t}); an RL episode is recorded up to its timeout")
+    early = np.flatnonzero(done[:-1])
+    if early.size:
+        fail(
+            f"done is 1 at step {int(early[0])} before the last step {t - 1}; terminations are "
+            "ignored, only the timeout ends an RL episode"
+        )
+    if max_episode_steps is not None and t > max_episode_steps:
+        fail(f"episode has {t} steps; the task allows at most {max_episode_steps}")
+    for key in ("joints", "action", "reward"):
+        if not np.isfinite(episode[key]).all():
+            fail(f"{key} contains NaN or infinite values")
+    return t
+
+
 def make_episode(
     *,
     rgb: Any,
@@ -484,6 +579,26 @@ def write_episode(
     else:
         check_schema(episode, source=path)
     arrays = {key: episode[key] for key in EPISODE_KEYS}
+    with _atomic_writer(path) as f:
+        np.savez(f, **arrays)
+    return path
+
+
+def write_rl_episode(
+    path: str | os.PathLike[str], episode: Mapping[str, Any], *, validate: bool = True
+) -> Path:
+    """Write an RL episode (:data:`RL_SCHEMA`, exact dtypes) to ``path`` atomically.
+
+    Like :func:`write_episode`: checked first (with ``validate`` the invariants of
+    :func:`validate_rl_episode`), keys in schema order, fixed zip timestamps, so equal
+    episodes give byte-identical files.
+    """
+    path = Path(path)
+    if validate:
+        validate_rl_episode(episode, source=path)
+    else:
+        _check_in_memory(episode, path, RL_SCHEMA)
+    arrays = {key: np.ascontiguousarray(episode[key]) for key in RL_EPISODE_KEYS}
     with _atomic_writer(path) as f:
         np.savez(f, **arrays)
     return path
@@ -549,8 +664,9 @@ class _Archive:
     chunked stream reads; compressed members go through zipfile.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, schema: Mapping[str, KeySpec] = SCHEMA) -> None:
         self.path = path
+        self.schema = schema
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such episode file")
         try:
@@ -569,7 +685,7 @@ class _Archive:
         self._stored: dict[str, memoryview] = {}
         self._headers: dict[str, tuple[tuple[int, ...], bool, np.dtype, int]] = {}
         try:
-            _check_keys(list(self.members), path)
+            _check_keys(list(self.members), path, schema)
         except BaseException:
             self.close()
             raise
@@ -637,17 +753,18 @@ class _Archive:
     def checked_headers(self) -> int:
         """Check every key's dtype/shape from the array headers; return the step count."""
         lengths: dict[str, int] = {}
-        for key in EPISODE_KEYS:
+        for key, spec in self.schema.items():
             shape, dtype = self.header(key)
             if dtype.hasobject:
                 raise EpisodeFormatError(
                     self.path,
-                    f"key {key!r} holds Python objects (dtype {dtype}); expected {SCHEMA[key].dtype_text()}",
+                    f"key {key!r} holds Python objects (dtype {dtype}); expected {spec.dtype_text()}",
                 )
-            t = _check_array(key, dtype, shape, self.path)
+            t = _check_array(key, dtype, shape, self.path, self.schema)
             if t is not None:
                 lengths[key] = t
-        return _check_lengths(lengths, int(self.array("episode_length")), self.path)
+        length = int(self.array("episode_length")) if "episode_length" in self.schema else None
+        return _check_lengths(lengths, length, self.path)
 
     def close(self) -> None:
         self.zf.close()
@@ -676,6 +793,47 @@ def read_episode(
     if validate:
         validate_episode(episode, source=path, max_episode_steps=max_episode_steps)
     return episode
+
+
+def is_rl_episode_file(path: str | os.PathLike[str]) -> bool:
+    """Whether the NPZ file at ``path`` holds exactly the :data:`RL_SCHEMA` keys (the RL
+    release's layout) rather than :data:`SCHEMA`'s; ``False`` for an unreadable file."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError):
+        return False
+    return sorted(names) == sorted(f"{k}.npy" for k in RL_EPISODE_KEYS)
+
+
+def read_rl_episode(
+    path: str | os.PathLike[str],
+    *,
+    validate: bool = False,
+    max_episode_steps: int | None = None,
+) -> Episode:
+    """Load one RL episode file (:data:`RL_SCHEMA`), checking keys, dtypes and shapes
+    (CRC-checked); with ``validate`` also :func:`validate_rl_episode`'s invariants."""
+    path = Path(path)
+    archive = _Archive(path, RL_SCHEMA)
+    try:
+        archive.checked_headers()
+        episode = {key: archive.array(key) for key in RL_EPISODE_KEYS}
+    finally:
+        archive.close()
+    if validate:
+        validate_rl_episode(episode, source=path, max_episode_steps=max_episode_steps)
+    return episode
+
+
+def read_rl_episode_headers(path: str | os.PathLike[str]) -> int:
+    """Check an RL episode file's keys, dtypes and shapes from the array headers only
+    (frames not read); return its length ``T``."""
+    archive = _Archive(Path(path), RL_SCHEMA)
+    try:
+        return archive.checked_headers()
+    finally:
+        archive.close()
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,10 @@ checks keys, shapes, dtypes, counts and episode boundaries:
 * NPZ (spec §2-§3): files numbered ``0..n-1``; every episode's schema and §3.1
   invariants; ``metadata.json`` keys, ``num_episodes``, per-episode lengths, seeds,
   ``success_once`` and reward sums agree with the files.
+* RL NPZ (the RL release's ``MIKASA-Robo/unbatched/<env_id>/``, told apart by its keys:
+  :data:`~mikasa_datasets.npz.RL_SCHEMA`): files numbered ``0..n-1``, every episode's
+  keys/dtypes/shapes and invariants (``done`` only at the last step), one episode length
+  (the task's horizon) across the directory; no ``metadata.json`` is expected.
 * RLDS (spec §6): ``dataset_info.json`` (builder name, version, ``train`` split, shards
   present), ``features.json`` (every required feature with its dtype/shape), and per
   episode: step count, image/proprio/action shapes and dtypes, ``is_first`` only at step
@@ -37,10 +41,13 @@ from mikasa_datasets.loaders import DatasetFormatError, detect_format, require
 from mikasa_datasets.npz import (
     METADATA_KEYS,
     EpisodeFormatError,
+    is_rl_episode_file,
     list_episode_files,
     read_episode,
     read_episode_summary,
     read_metadata,
+    read_rl_episode,
+    read_rl_episode_headers,
     summarize_episode,
 )
 
@@ -109,6 +116,8 @@ def _is_version(name: str) -> bool:
 def validate_npz(path: str | os.PathLike[str], *, quick: bool = False) -> ValidationReport:
     """Validate one ``.npz`` episode file or an NPZ task directory with ``metadata.json``."""
     p = Path(path)
+    if is_rl_episode_file(p) or (p.is_dir() and _is_rl_dir(p)):
+        return _validate_rl_npz(p, quick=quick)
     if p.is_file():
         if quick:
             s = read_episode_summary(p)
@@ -176,6 +185,41 @@ def validate_npz(path: str | os.PathLike[str], *, quick: bool = False) -> Valida
     return ValidationReport(
         p, "npz", len(files), sum(s.episode_length for s in summaries), quick=quick
     )
+
+
+def _is_rl_dir(directory: Path) -> bool:
+    files = list_episode_files(directory)
+    return bool(files) and is_rl_episode_file(files[0])
+
+
+def _rl_episode_length(f: Path, quick: bool) -> int:
+    if quick:
+        return read_rl_episode_headers(f)
+    return int(read_rl_episode(f, validate=True)["reward"].shape[0])
+
+
+def _validate_rl_npz(p: Path, *, quick: bool) -> ValidationReport:
+    """An RL episode file, or an ``unbatched/<env_id>`` directory of them."""
+    if p.is_file():
+        return ValidationReport(p, "npz-rl", 1, _rl_episode_length(p, quick), quick=quick)
+    files = list_episode_files(p)
+    frames, horizon = 0, None
+    for expected, f in enumerate(files):
+        if f.name != f"train_data_{expected}.npz":
+            raise DatasetFormatError(
+                p / f"train_data_{expected}.npz",
+                f"missing: episode files must be numbered 0..{len(files) - 1} without gaps",
+            )
+        if not is_rl_episode_file(f):
+            read_rl_episode_headers(f)  # names the missing/extra keys (or the corruption)
+        t = _rl_episode_length(f, quick)
+        if horizon is not None and t != horizon:
+            raise DatasetFormatError(
+                f, f"has {t} steps but train_data_0.npz has {horizon}; every RL episode runs to the task's timeout"
+            )
+        horizon = t
+        frames += t
+    return ValidationReport(p, "npz-rl", len(files), frames, quick=quick)
 
 
 # --------------------------------------------------------------------------- RLDS

@@ -43,7 +43,7 @@ import random
 import sys
 import time
 import traceback
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
@@ -61,10 +61,14 @@ __all__ = [
     "DEFAULT_NUM_EPISODES",
     "DEFAULT_OUT",
     "DEFAULT_START_SEED",
+    "InlinePool",
+    "ProcessPool",
     "collect",
     "default_max_attempts",
+    "locked_directory",
     "main",
     "resolve_task",
+    "seed_global_rngs",
 ]
 
 DEFAULT_NUM_EPISODES = 250
@@ -166,7 +170,7 @@ def _language(info: Any) -> str:
     return value if isinstance(value, str) else ""
 
 
-def _seed_global_rngs(seed: int) -> None:
+def seed_global_rngs(seed: int) -> None:
     """So an oracle drawing from global RNGs still depends only on the episode seed."""
     import torch
 
@@ -234,7 +238,7 @@ class _AttemptRunner:
         self._ensure_env()
         env, oracle = self.env, self.oracle
         max_steps = int(env.max_episode_steps)
-        _seed_global_rngs(seed)
+        seed_global_rngs(seed)
         # A fresh scene: after a plain reset the episode would depend, in the last bits, on
         # the attempts this worker ran before (PhysX contact caches).
         obs, info = env.reset(seed=seed, options={"reconfigure": True})
@@ -298,12 +302,18 @@ class _AttemptRunner:
 
 
 # --------------------------------------------------------------------------- executors
-class _InlinePool:
-    """``--workers 1``: attempts run in this process, one at a time."""
+class InlinePool:
+    """``--workers 1``: attempts run in this process, one at a time.
 
-    def __init__(self, runner_args: tuple[Any, ...]) -> None:
-        self.runner = _AttemptRunner(*runner_args)
-        self.queue: list[int] = []
+    ``factory(*runner_args)`` builds the runner (default :class:`_AttemptRunner`; the RL
+    collector, ``mikasa_robo_rl.collect``, passes its own).
+    """
+
+    def __init__(
+        self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None
+    ) -> None:
+        self.runner = (factory or _AttemptRunner)(*runner_args)
+        self.queue: list[Any] = []
 
     def submit(self, seed: int) -> None:
         self.queue.append(seed)
@@ -315,7 +325,7 @@ class _InlinePool:
         self.runner.close()
 
 
-def _start_runner(runner_args: tuple[Any, ...]) -> _AttemptRunner:
+def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None) -> Any:
     # W workers already use the cores: one thread each, for torch and for Mesa's CPU
     # Vulkan rasteriser (its frames do not depend on the thread count).
     os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -324,41 +334,61 @@ def _start_runner(runner_args: tuple[Any, ...]) -> _AttemptRunner:
     import torch
 
     torch.set_num_threads(1)
-    return _AttemptRunner(*runner_args)
+    return (factory or _AttemptRunner)(*runner_args)
 
 
-def _worker_main(worker_id: int, runner_args: tuple[Any, ...], jobs: Any, results: Any) -> None:
-    """Entry point of a spawn-started worker: run seeds from ``jobs`` until ``None``."""
+def _worker_main(
+    worker_id: int,
+    runner_args: tuple[Any, ...],
+    jobs: Any,
+    results: Any,
+    factory: Callable[..., Any] | None = None,
+) -> None:
+    """Entry point of a spawn-started worker: run jobs (seeds) from ``jobs`` until ``None``."""
     from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
 
-    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args))
+    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args, factory))
 
 
-class _ProcessPool:
-    """``--workers W``: W spawn-started processes sharing one job queue."""
+class ProcessPool:
+    """``--workers W``: W spawn-started processes sharing one job queue.
 
-    def __init__(self, runner_args: tuple[Any, ...], workers: int) -> None:
+    Each builds ``factory(*runner_args)`` (default :class:`_AttemptRunner`; ``factory``
+    must be importable by name, e.g. a module-level class). A job's result names its job
+    in the attribute ``job_attr`` (an attempt's ``seed``).
+    """
+
+    def __init__(
+        self,
+        runner_args: tuple[Any, ...],
+        workers: int,
+        factory: Callable[..., Any] | None = None,
+        *,
+        job_attr: str = "seed",
+        name: str = "mikasa-collect",
+    ) -> None:
         ctx = mp.get_context("spawn")
         self.jobs = ctx.Queue()
         self.results = ctx.Queue()
-        self.in_flight: set[int] = set()
+        self.job_attr = job_attr
+        self.in_flight: set[Any] = set()
         self.processes = [
             ctx.Process(
                 target=_worker_main,
-                args=(wid, runner_args, self.jobs, self.results),
+                args=(wid, runner_args, self.jobs, self.results, factory),
                 daemon=True,
-                name=f"mikasa-collect-{wid}",
+                name=f"{name}-{wid}",
             )
             for wid in range(workers)
         ]
         for p in self.processes:
             p.start()
 
-    def submit(self, seed: int) -> None:
+    def submit(self, seed: Any) -> None:
         self.in_flight.add(seed)
         self.jobs.put(seed)
 
-    def get(self) -> AttemptResult:
+    def get(self) -> Any:
         while True:
             try:
                 kind, wid, payload = self.results.get(timeout=1.0)
@@ -366,15 +396,16 @@ class _ProcessPool:
                 dead = [p for p in self.processes if not p.is_alive()]
                 if dead and self.in_flight:
                     raise CollectionFailed(
-                        f"worker {dead[0].name} died (exit code {dead[0].exitcode}) with seeds "
-                        f"{sorted(self.in_flight)} in flight; saved episodes are kept, rerun to resume"
+                        f"worker {dead[0].name} died (exit code {dead[0].exitcode}) with "
+                        f"{self.job_attr}s {sorted(self.in_flight)} in flight; saved episodes "
+                        "are kept, rerun to resume"
                     ) from None
                 continue
             if kind == "fatal":
                 raise CollectionFailed(f"worker {wid} failed to start:\n{payload}")
             if kind == "ready":
                 continue
-            self.in_flight.discard(payload.seed)
+            self.in_flight.discard(getattr(payload, self.job_attr))
             return payload
 
     def close(self, graceful: bool = True) -> None:
@@ -448,7 +479,7 @@ class CollectionSummary:
 
 
 @contextmanager
-def _locked(directory: Path) -> Iterator[None]:
+def locked_directory(directory: Path) -> Iterator[None]:
     """Exclusive advisory lock on the task directory: two collectors into one directory
     would interleave indices."""
     fd = os.open(directory, os.O_RDONLY)
@@ -564,7 +595,7 @@ def collect(
     staging = staging_dir_of(out, env_id)
     directory.mkdir(parents=True, exist_ok=True)
     summary = CollectionSummary(env_id, directory, num_episodes, 0, workers=workers)
-    with _locked(directory):
+    with locked_directory(directory):
         # A run killed mid-write leaves temporary files (never final names) and staged
         # attempts; both are redone deterministically.
         remove_stale_temp_files(directory)
@@ -597,7 +628,7 @@ def collect(
         runner_args = (env_id, str(staging), min_episode_length, spec.language_instruction)
         n_workers = min(workers, missing)
         pool: Any = (
-            _InlinePool(runner_args) if n_workers == 1 else _ProcessPool(runner_args, n_workers)
+            InlinePool(runner_args) if n_workers == 1 else ProcessPool(runner_args, n_workers)
         )
         log_attempts = (
             log_attempts or os.environ.get("MIKASA_LOG_EPISODE_LENGTHS", "").lower() in _TRUTHY
@@ -669,7 +700,7 @@ def collect(
             ok = True
         finally:
             bar.close()
-            if isinstance(pool, _ProcessPool):
+            if isinstance(pool, ProcessPool):
                 pool.close(graceful=ok)
             else:
                 pool.close()

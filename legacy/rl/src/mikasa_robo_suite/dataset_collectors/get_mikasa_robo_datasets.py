@@ -8,4 +8,4 @@ from mikasa_robo_rl.collect import main
 from mikasa_robo_rl.wrappers import env_info  # noqa: F401
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -1,0 +1,135 @@
+"""The PPO agents of the RL release: the state-only MLP (``AgentStateOnly``).
+
+``AgentStateOnly`` is the network of the release's ``ppo_memtasks`` state baseline, whose
+``final_success_ckpt.pt`` checkpoints the RL data collector replays
+(``<ckpt-dir>/oracle_checkpoints/ppo_memtasks/state/normalized_dense/<env_id>/**``). Its
+input is the state-mode observation flattened (``state``, then ``task_cue`` where the task
+has one: :func:`flatten_state_obs`); the checkpoint is its plain ``state_dict``
+(``critic.{0,2,4,6}.*``, ``actor_mean.{0,2,4,6}.*``, ``actor_logstd``).
+:func:`find_checkpoints` and :func:`load_agent` read that layout.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from torch.distributions.normal import Normal
+
+__all__ = [
+    "CKPT_NAME",
+    "CKPT_SUBDIR",
+    "AgentStateOnly",
+    "find_checkpoints",
+    "flatten_state_obs",
+    "layer_init",
+    "load_agent",
+]
+
+HIDDEN = 256
+CKPT_SUBDIR = "oracle_checkpoints/ppo_memtasks/state/normalized_dense"
+"""Where the release kept its PPO state agents, under a checkpoint root, per env id."""
+CKPT_NAME = "final_success_ckpt.pt"
+
+
+def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:
+    """Orthogonal weights with gain ``std`` and constant bias (CleanRL's PPO init)."""
+    nn.init.orthogonal_(layer.weight, std)
+    nn.init.constant_(layer.bias, bias)
+    return layer
+
+
+def _mlp(in_dim: int, out_dim: int, out_std: float) -> nn.Sequential:
+    return nn.Sequential(
+        layer_init(nn.Linear(in_dim, HIDDEN)),
+        nn.Tanh(),
+        layer_init(nn.Linear(HIDDEN, HIDDEN)),
+        nn.Tanh(),
+        layer_init(nn.Linear(HIDDEN, HIDDEN)),
+        nn.Tanh(),
+        layer_init(nn.Linear(HIDDEN, out_dim), std=out_std),
+    )
+
+
+class AgentStateOnly(nn.Module):
+    """PPO actor-critic MLP on the flattened state observation.
+
+    Critic and actor mean are ``Linear(obs_dim, 256)-Tanh-Linear(256, 256)-Tanh-
+    Linear(256, 256)-Tanh-Linear(256, out)``; the action distribution is a diagonal
+    Gaussian with the state-independent ``actor_logstd`` (shape ``(1, action_dim)``).
+    """
+
+    def __init__(self, obs_dim: int, action_dim: int) -> None:
+        super().__init__()
+        self.obs_dim, self.action_dim = int(obs_dim), int(action_dim)
+        self.critic = _mlp(self.obs_dim, 1, out_std=1.0)
+        self.actor_mean = _mlp(self.obs_dim, self.action_dim, out_std=0.01 * math.sqrt(2))
+        self.actor_logstd = nn.Parameter(torch.ones(1, self.action_dim) * -0.5)
+
+    def get_value(self, x: torch.Tensor) -> torch.Tensor:
+        """V(x), shape ``(B, 1)``."""
+        return self.critic(x)
+
+    def get_action(self, x: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
+        """The action for ``x``: the mean if ``deterministic``, else a Gaussian sample."""
+        action_mean = self.actor_mean(x)
+        if deterministic:
+            return action_mean
+        std = torch.exp(self.actor_logstd.expand_as(action_mean))
+        return Normal(action_mean, std).sample()
+
+    def get_action_and_value(
+        self, x: torch.Tensor, action: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
+        action_mean = self.actor_mean(x)
+        std = torch.exp(self.actor_logstd.expand_as(action_mean))
+        probs = Normal(action_mean, std)
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
+
+    @classmethod
+    def from_state_dict(cls, state_dict: Mapping[str, Any]) -> AgentStateOnly:
+        """An agent sized from a checkpoint's ``state_dict`` and loaded (strict)."""
+        try:
+            obs_dim = int(state_dict["actor_mean.0.weight"].shape[1])
+            action_dim = int(state_dict["actor_logstd"].shape[-1])
+        except (KeyError, AttributeError, IndexError) as exc:
+            raise ValueError(f"not an AgentStateOnly state_dict (missing {exc})") from None
+        agent = cls(obs_dim, action_dim)
+        agent.load_state_dict(state_dict)
+        return agent
+
+
+def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:
+    """The agent input of a state-mode observation: its entries in key order (``state``,
+    then ``task_cue``), each flattened per env, concatenated as float32 ``(B, obs_dim)``."""
+    parts = [torch.as_tensor(np.asarray(v) if not torch.is_tensor(v) else v) for v in obs.values()]
+    return torch.cat([p.reshape(p.shape[0], -1).to(torch.float32) for p in parts], dim=1)
+
+
+def find_checkpoints(ckpt_dir: str | os.PathLike[str], env_id: str) -> list[Path]:
+    """Every ``final_success_ckpt.pt`` under ``<ckpt_dir>/<CKPT_SUBDIR>/<env_id>`` (any
+    depth), sorted by path; ``ValueError`` if there is none."""
+    root = Path(ckpt_dir) / CKPT_SUBDIR / env_id
+    found = sorted(root.rglob(CKPT_NAME)) if root.is_dir() else []
+    if not found:
+        raise ValueError(f"no checkpoint {root}/**/{CKPT_NAME}")
+    return found
+
+
+def load_agent(path: str | os.PathLike[str]) -> AgentStateOnly:
+    """The agent saved (as a ``state_dict``) at ``path``, in eval mode, on the CPU;
+    ``ValueError`` naming the file if it is not one."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        return AgentStateOnly.from_state_dict(state).eval()
+    except Exception as exc:
+        raise ValueError(f"{path}: not an AgentStateOnly checkpoint: {exc}") from None
