@@ -8,6 +8,7 @@ import gymnasium as gym
 
 from mikasa_oracles.families import ALL_ORACLES
 from mikasa_oracles.families.selection import SelectionOracle
+from mikasa_oracles.joint_delta import EEDeltaToJointDelta, JointDeltaOracle
 from mikasa_oracles.rollout import Rollout, rollout
 
 __version__ = "0.1.0"
@@ -37,4 +38,14 @@ def make_oracle(env: gym.Env, **kwargs) -> Any:
     return ORACLES[family](env, **kwargs)
 
 
-__all__ = ["ORACLES", "Rollout", "SelectionOracle", "has_oracle", "make_oracle", "rollout", "__version__"]
+__all__ = [
+    "ORACLES",
+    "EEDeltaToJointDelta",
+    "JointDeltaOracle",
+    "Rollout",
+    "SelectionOracle",
+    "has_oracle",
+    "make_oracle",
+    "rollout",
+    "__version__",
+]
