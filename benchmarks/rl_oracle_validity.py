@@ -1,0 +1,108 @@
+"""Validity of the 32 RL tasks: scripted-oracle and zero-action success over many seeds.
+
+A task is valid when its oracle (``mikasa_robo_rl.oracles.make_rl_oracle``: the VLA family
+oracle acting in ``pd_joint_delta_pos``) reaches ``success_once`` on >= 95 % of the seeds
+and zero actions on none. State observations, CPU PhysX, one env per worker process;
+jobs are (env id, policy, block of seeds).
+
+    python benchmarks/rl_oracle_validity.py                        # 50 seeds, every RL id
+    python benchmarks/rl_oracle_validity.py --seeds 10 --env-ids RememberColor3-v0,TakeItBack-v0
+    python benchmarks/rl_oracle_validity.py --workers 16 --out results/rl_validity
+
+Writes ``<out>/rl_oracle_validity.json`` and ``.md`` (a table) and prints the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+FIRST_SEED = 4242424242
+SEEDS_PER_JOB = 10
+TARGET = 0.95
+
+
+def run_job(env_id: str, policy: str, seeds: list[int]) -> tuple[str, str, list[int]]:
+    """Roll ``policy`` ("oracle" or "zero") out on ``seeds``; the seeds that succeeded."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import gymnasium as gym
+    import numpy as np
+    import torch
+    from mikasa_oracles import rollout
+    from mikasa_robo_rl.oracles import make_rl_oracle
+
+    torch.set_num_threads(1)
+
+    class ZeroPolicy:
+        def reset(self) -> None:
+            pass
+
+        def forward(self, obs):
+            return np.zeros(8, dtype=np.float32)
+
+    env = gym.make(env_id, obs_mode="state", control_mode="pd_joint_delta_pos", reward_mode="normalized_dense")
+    agent = make_rl_oracle(env) if policy == "oracle" else ZeroPolicy()
+    # The oracle may stop at its first success; zero actions run the whole episode.
+    won = [s for s in seeds if rollout(env, agent, s, stop_on_success=policy == "oracle").success_once]
+    env.close()
+    return env_id, policy, won
+
+
+def main() -> None:
+    """Parse arguments, run the jobs in parallel, print and write the table."""
+    import mikasa_robo_rl
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env-ids", default=None, help="comma-separated RL ids (default: all 32)")
+    parser.add_argument("--seeds", type=int, default=50, help="seeds per id (from 4242424242)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count(), help="worker processes")
+    parser.add_argument("--out", default="results/rl_oracle_validity", help="output directory")
+    args = parser.parse_args()
+    env_ids = args.env_ids.split(",") if args.env_ids else list(mikasa_robo_rl.rl_env_ids())
+    for env_id in env_ids:
+        mikasa_robo_rl.get_rl_task(env_id)  # unknown ids fail here, before any work
+    seeds = list(range(FIRST_SEED, FIRST_SEED + args.seeds))
+    blocks = [seeds[i : i + SEEDS_PER_JOB] for i in range(0, len(seeds), SEEDS_PER_JOB)]
+    jobs = [(e, p, b) for e in env_ids for p in ("oracle", "zero") for b in blocks]
+
+    wins: dict[tuple[str, str], list[int]] = {(e, p): [] for e in env_ids for p in ("oracle", "zero")}
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(run_job, *job) for job in jobs]
+        for done, future in enumerate(as_completed(futures), 1):
+            env_id, policy, won = future.result()
+            wins[(env_id, policy)] += won
+            print(f"[{done}/{len(jobs)}] {env_id} {policy}: {len(won)} successes", flush=True)
+    wall = time.perf_counter() - start
+
+    rows = []
+    for env_id in env_ids:
+        oracle, zero = len(wins[(env_id, "oracle")]) / len(seeds), len(wins[(env_id, "zero")]) / len(seeds)
+        rows.append(dict(env_id=env_id, oracle_success=oracle, zero_success=zero,
+                         valid=oracle >= TARGET and zero == 0.0,
+                         oracle_failed_seeds=sorted(set(seeds) - set(wins[(env_id, "oracle")])),
+                         zero_succeeded_seeds=sorted(wins[(env_id, "zero")])))
+    lines = ["| env id | oracle success_once | zero-action success_once | valid |", "|---|---|---|---|"]
+    lines += [f"| {r['env_id']} | {r['oracle_success']:.2f} | {r['zero_success']:.2f} | {'yes' if r['valid'] else 'NO'} |"
+              for r in rows]
+    summary = f"{sum(r['valid'] for r in rows)}/{len(rows)} ids valid over {len(seeds)} seeds; {wall:.0f} s with {args.workers} workers"
+    print("\n".join(lines) + "\n\n" + summary)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in (
+        ("rl_oracle_validity.json", json.dumps(dict(seeds=len(seeds), first_seed=FIRST_SEED, wall_s=wall,
+                                                    workers=args.workers, rows=rows), indent=2)),
+        ("rl_oracle_validity.md", "\n".join(lines) + f"\n\n{summary}\n"),
+    ):
+        tmp = out / (name + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(out / name)
+
+
+if __name__ == "__main__":
+    main()
