@@ -174,6 +174,7 @@ class EpisodeResult:
 
 
 def _first(x: Any) -> Any:
+    """Element 0 of a (1, ...) tensor or array, as a numpy scalar."""
     return np.asarray(x.cpu() if hasattr(x, "cpu") else x).reshape(-1)[0]
 
 

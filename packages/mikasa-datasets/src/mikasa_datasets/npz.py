@@ -134,15 +134,19 @@ class KeySpec:
         return f"({inner},)" if len(self.shape) == 1 else f"({inner})"
 
 
+# Entries the VLA and RL episode files share.
+_RGB_SPEC = KeySpec(
+    "rgb",
+    np.dtype(np.uint8),
+    ("T", IMAGE_SIZE, IMAGE_SIZE, RGB_CHANNELS),
+    "channels 0-2 base_camera, 3-5 hand_camera; observation before step t",
+)
+_REWARD_SPEC = KeySpec("reward", np.dtype(np.float32), ("T",), "normalized_dense reward of step t")
+
 SCHEMA: dict[str, KeySpec] = {
     spec.name: spec
     for spec in (
-        KeySpec(
-            "rgb",
-            np.dtype(np.uint8),
-            ("T", IMAGE_SIZE, IMAGE_SIZE, RGB_CHANNELS),
-            "channels 0-2 base_camera, 3-5 hand_camera; observation before step t",
-        ),
+        _RGB_SPEC,
         KeySpec(
             "proprio",
             np.dtype(np.float32),
@@ -155,7 +159,7 @@ SCHEMA: dict[str, KeySpec] = {
             ("T", ACTION_DIM),
             "pd_ee_delta_pose action clipped to [-1, 1]",
         ),
-        KeySpec("reward", np.dtype(np.float32), ("T",), "normalized_dense reward of step t"),
+        _REWARD_SPEC,
         KeySpec("success", np.dtype(np.int32), ("T",), "info['success'] after step t (0/1)"),
         KeySpec(
             "done",
@@ -180,12 +184,7 @@ RL_ACTION_DIM = 8
 RL_SCHEMA: dict[str, KeySpec] = {
     spec.name: spec
     for spec in (
-        KeySpec(
-            "rgb",
-            np.dtype(np.uint8),
-            ("T", IMAGE_SIZE, IMAGE_SIZE, RGB_CHANNELS),
-            "channels 0-2 base_camera, 3-5 hand_camera; observation before step t",
-        ),
+        _RGB_SPEC,
         KeySpec(
             "joints",
             np.dtype(np.float32),
@@ -193,7 +192,7 @@ RL_SCHEMA: dict[str, KeySpec] = {
             "[tcp_pose (x, y, z, qw, qx, qy, qz), qpos 9, qvel 9] before step t",
         ),
         KeySpec("action", np.dtype(np.float32), ("T", RL_ACTION_DIM), "pd_joint_delta_pos action"),
-        KeySpec("reward", np.dtype(np.float32), ("T",), "normalized_dense reward of step t"),
+        _REWARD_SPEC,
         KeySpec("success", np.dtype(np.int64), ("T",), "info['success'] after step t (0/1)"),
         KeySpec(
             "done",
