@@ -75,6 +75,15 @@ def test_bounded_tracking_step():
         assert np.linalg.norm(jac @ step - wanted) <= np.linalg.norm(jac @ scaled - wanted) + 1e-9
 
 
+
+def test_z_weight_trades_sideways_progress_for_height():
+    rng = np.random.default_rng(3)
+    low, high = np.full(7, -0.1), np.full(7, 0.1)
+    for _ in range(20):
+        jac, delta = rng.normal(size=(6, 7)), rng.uniform(-0.5, 0.5, 7)
+        error = [jac @ bounded_tracking_step(jac, delta, low, high, z_weight=w) - jac @ delta for w in (1.0, 10.0)]
+        assert abs(error[1][2]) <= abs(error[0][2]) + 1e-9
+
 def test_converter_needs_a_joint_delta_mode(make_env):
     env = make_env("RememberColor3-VLA-v0")  # pd_ee_delta_pose
     env.reset(seed=SEED)

@@ -2,30 +2,32 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from mikasa_oracles import rollout
-from mikasa_robo_rl import rl_env_ids
+from mikasa_robo_rl import get_rl_task, rl_env_ids
 from mikasa_robo_rl.oracles import make_rl_oracle
 from mikasa_robo_rl.wrappers import apply_rl_wrappers
 
 RL_IDS = list(rl_env_ids())
 SEED = 4242424242
-# Ids whose oracle is below the 95 % target (50 seeds, benchmarks/rl_oracle_validity.py,
-# 2026-11-25): joint deltas move the arm ~1.5x slower than the end-effector commands the
-# family oracles were tuned for, and these horizons leave no slack (issue 13 stays open).
-# They are checked for progress (more return than zero actions), the rest for success.
-SHORTFALL = {
-    "ShellGamePick-v0": 0.84,
-    "InterceptSlow-v0": 0.88,
-    "InterceptFast-v0": 0.76,
-    "SeqOfColors3-v0": 0.94,
-    "SeqOfColors5-v0": 0.16,
+# The colour-sequence ids are time-bound (50 seeds, benchmarks/rl_oracle_validity.py,
+# legacy/rl/VALIDITY.md: the rate within the published horizon): touching 3-7 cubes in cue
+# order around a 1.6 rad arc takes about as long as (3 cubes) or longer than (5, 7) the
+# 120 steps allow an arm whose base joint turns at most 0.73 rad/s in pd_joint_delta_pos.
+# Their oracle is also checked within EXTENDED x the horizon, and the quick test runs there.
+TIME_BOUND = {
+    "SeqOfColors3-v0": 0.96,
+    "SeqOfColors5-v0": 0.20,
     "SeqOfColors7-v0": 0.0,
-    "ChainOfColors3-v0": 0.94,
-    "ChainOfColors5-v0": 0.16,
+    "ChainOfColors3-v0": 0.96,
+    "ChainOfColors5-v0": 0.20,
     "ChainOfColors7-v0": 0.0,
 }
+EXTENDED = 3
+TARGET = 0.95
 
 
 class ZeroPolicy:
@@ -50,17 +52,19 @@ def _successes(env, policy, seeds, stop_on_success: bool = True) -> int:
     return sum(rollout(env, policy, s, stop_on_success).success_once for s in seeds)
 
 
+def _extended_env(make_rl_env, env_id: str):
+    """``env_id`` with EXTENDED x its horizon as the step limit."""
+    return make_rl_env(env_id, max_episode_steps=EXTENDED * get_rl_task(env_id).max_episode_steps)
+
+
 @pytest.mark.parametrize("env_id", RL_IDS)
 def test_oracle_solves_first_seeds_and_zero_actions_do_not(make_rl_env, env_id):
     env = make_rl_env(env_id)
-    seeds = range(SEED, SEED + 2)
-    zero = rollout(env, ZeroPolicy(), SEED, stop_on_success=False)
-    assert not zero.success_once
-    if env_id in SHORTFALL:
-        oracle = rollout(env, make_rl_oracle(env), SEED, stop_on_success=False)
-        assert oracle.episode_return > zero.episode_return
-    else:
-        assert _successes(env, make_rl_oracle(env), seeds) == 2
+    assert not rollout(env, ZeroPolicy(), SEED, stop_on_success=False).success_once
+    if env_id in TIME_BOUND:
+        env = _extended_env(make_rl_env, env_id)
+    # A few seeds: most, not all (ids at 96 % fail one seed in 25; the rate is the slow test's).
+    assert _successes(env, make_rl_oracle(env), range(SEED, SEED + 3)) >= 2
 
 
 def test_oracle_acts_in_joint_deltas_through_the_rl_rgb_chain(make_rl_env):
@@ -84,6 +88,10 @@ def test_oracle_needs_the_rl_control_mode(make_rl_env, make_env):
 def test_oracle_success_rate_50_seeds(make_rl_env, env_id):
     env = make_rl_env(env_id)
     seeds = range(SEED, SEED + 50)
-    target = 48 if env_id not in SHORTFALL else int(SHORTFALL[env_id] * 50) - 2  # >= 95 %, or no regression
+    measured = TIME_BOUND.get(env_id, 1.0)
+    target = math.ceil(TARGET * 50) if measured >= TARGET else int(measured * 50) - 2  # or no regression
     assert _successes(env, make_rl_oracle(env), seeds) >= target
     assert _successes(env, ZeroPolicy(), seeds, stop_on_success=False) == 0
+    if env_id in TIME_BOUND:
+        env = _extended_env(make_rl_env, env_id)
+        assert _successes(env, make_rl_oracle(env), seeds) >= math.ceil(TARGET * 50)

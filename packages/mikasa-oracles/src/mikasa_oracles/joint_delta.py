@@ -89,7 +89,9 @@ class EEDeltaToJointDelta:
     (default) takes the bounded step whose TCP motion is closest to the wanted one
     (``bounded_tracking_step``), weighting rotation by the first of ``rot_weights`` (tried
     in order) that leaves at most ``rot_tol`` rad of the wanted rotation undone, so
-    translation goes first while the hand's orientation drifts little; ``"scale"``
+    translation goes first while the hand's orientation drifts little (``z_weight`` > 1
+    puts the vertical before the horizontal, so a saturated step keeps its height rather
+    than dipping into what it passes over); ``"scale"``
     shrinks the whole step uniformly; ``"clip"`` clips each joint.
     """
 
@@ -101,6 +103,7 @@ class EEDeltaToJointDelta:
         rot_weights: Sequence[float] = ROT_WEIGHTS,
         rot_tol: float = ROT_TOL,
         reg: float = 0.01,
+        z_weight: float = 1.0,
     ) -> None:
         base_env = base_env.unwrapped
         if base_env.num_envs != 1:
@@ -115,6 +118,7 @@ class EEDeltaToJointDelta:
         self.rot_weights = tuple(rot_weights)
         self.rot_tol = rot_tol
         self.reg = reg
+        self.z_weight = z_weight
         self.ik_failures = 0
         """Steps whose IK did not converge (diagnostics)."""
         self._setup: _Setup | None = None
@@ -281,7 +285,7 @@ class EEDeltaToJointDelta:
         self, jac: np.ndarray, delta: np.ndarray, low: np.ndarray, high: np.ndarray
     ) -> np.ndarray:
         for weight in self.rot_weights:
-            step = bounded_tracking_step(jac, delta, low, high, weight, self.reg)
+            step = bounded_tracking_step(jac, delta, low, high, weight, self.reg, self.z_weight)
             if np.linalg.norm(jac[3:] @ (step - delta)) <= self.rot_tol:
                 break
         return step
@@ -300,17 +304,19 @@ def bounded_tracking_step(
     high: np.ndarray,
     rot_weight: float = 0.3,
     reg: float = 0.01,
+    z_weight: float = 1.0,
 ) -> np.ndarray:
     """The joint step ``x`` within [``low``, ``high``] whose linearised TCP motion ``jac @ x``
     is closest to that of ``delta``.
 
     Minimises ``|W jac (x - delta)|² + reg² |x - delta|²`` (``W`` weights the rotation rows
-    of ``jac``, [linear; angular], by ``rot_weight``; ``reg`` picks, among equally good steps
+    of ``jac``, [linear; angular], by ``rot_weight`` and the vertical row by ``z_weight``
+    (the body frame's z: the TCP's approach axis, vertical for a hand pointing down); ``reg`` picks, among equally good steps
     of a redundant arm, the one closest to ``delta``): a box-constrained least-squares
     problem, solved exactly by a primal active-set method.
     """
     n = len(delta)
-    weights = np.array([1.0, 1.0, 1.0, rot_weight, rot_weight, rot_weight])
+    weights = np.array([1.0, 1.0, z_weight, rot_weight, rot_weight, rot_weight])
     m = np.vstack([weights[:, None] * jac, reg * np.eye(n)])
     hess = m.T @ m
     lin = hess @ delta

@@ -15,6 +15,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from mikasa_envs.building_blocks.buttons import CONFIRM_LIFT
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards
@@ -40,6 +41,11 @@ PRESS_Z = 0.07
 REGISTERED_PRESS_Z = 0.08
 PRESS_CHECK_RADIUS = 0.055
 LIFT_Z = 0.18
+# With ``read_press_latch``: lift this far past the height the env needs to confirm a press
+# (where it registered + CONFIRM_LIFT), and aim the press this far from the button centre on
+# the near side (a press registers anywhere within 0.065 of it).
+CONFIRM_MARGIN = 0.01
+PRESS_AIM_RADIUS = 0.035
 
 
 class ColorSequenceOracle:
@@ -57,13 +63,23 @@ class ColorSequenceOracle:
         approach_slope: float = APPROACH_SLOPE,
         approach_max_lift: float = APPROACH_MAX_LIFT,
         descent_gain: float = DESCENT_GAIN,
+        park_point: np.ndarray = PARK_POINT,
+        read_press_latch: bool = False,
     ) -> None:
+        """``gain`` .. ``descent_gain`` shape the motion (module constants above).
+        ``park_point``: where the TCP waits during the cue and memory phases.
+        ``read_press_latch``: press the button as soon as the press radius allows and lift
+        only as far as the env's press latch needs (read from the env, like the touches),
+        instead of pressing at the centre and lifting to a fixed height; for short horizons.
+        """
         self.env = env
         self.base = env.unwrapped
         self.gain = gain
         self.approach_slope = approach_slope
         self.approach_max_lift = approach_max_lift
         self.descent_gain = descent_gain
+        self.park_point = np.asarray(park_point, dtype=float)
+        self.read_press_latch = read_press_latch
         # Seq/Chain book touches in order slots and enforce the cue order; Bunch has none.
         self.ordered = hasattr(self.base, "touched_cubes_idx")
         self.reset()
@@ -123,7 +139,7 @@ class ColorSequenceOracle:
             self._observe_cue()
         if t < int(base.action_phase_start[0]):
             # Behind the cue spots as the base camera sees them: the cue stays in view.
-            return self._move(tcp_pose, PARK_POINT)
+            return self._move(tcp_pose, self.park_point)
         cubes = base.cube_positions()[0].cpu().numpy()
         button = base.button_xy[0].cpu().numpy()
         if self.plan is None:
@@ -133,6 +149,8 @@ class ColorSequenceOracle:
         if remaining:
             goal = cubes[remaining[0]] + np.array([0.0, 0.0, TOUCH_ABOVE_CENTRE])
             return self._move(tcp_pose, self._approach(tcp, goal))
+        if self.read_press_latch:
+            return self._move(tcp_pose, self._press_goal(tcp, button))
         if self.press_start is None:
             over_button = np.linalg.norm(tcp[:2] - button) < PRESS_CHECK_RADIUS
             if over_button and tcp[2] <= REGISTERED_PRESS_Z:
@@ -142,6 +160,20 @@ class ColorSequenceOracle:
                 return self._move(tcp_pose, np.array([*button, PRESS_Z]))
         # Lift until the press is confirmed, then hold still there.
         return self._move(tcp_pose, np.array([*self.press_start[:2], LIFT_Z]))
+
+    def _press_goal(self, tcp: np.ndarray, button: np.ndarray) -> np.ndarray:
+        """Press (``read_press_latch``): in at press height at the nearest point within
+        PRESS_AIM_RADIUS of the button centre until the env registers the press, then up to
+        just past the height that confirms it."""
+        latch = self.base.press_latch
+        if bool(latch.pending[0]) or bool(self.base.button_pressed[0]):
+            if self.press_start is None:
+                self.press_start = np.array([*tcp[:2], float(latch.press_start_z[0])])
+            return np.array([*self.press_start[:2], self.press_start[2] + CONFIRM_LIFT + CONFIRM_MARGIN])
+        offset = tcp[:2] - button
+        distance = np.linalg.norm(offset)
+        aim = button + offset * min(1.0, PRESS_AIM_RADIUS / max(distance, 1e-9))
+        return np.array([*aim, PRESS_Z])
 
 
 ORACLES: dict[str, type] = {

@@ -311,6 +311,30 @@ class InterceptOracle(BallChaser):
     AIM_ANGLE_TOL = np.radians(2.0)  # planned leaving direction within this of the wanted one
     UNRELIABLE_PENALTY = 0.004  # m per step of leaving-speed error worth a well-measured approach
 
+    def __init__(
+        self,
+        env: Any,
+        gain: float | None = None,
+        align_tol_per_speed: float = 0.0,
+        wait_past_goal_y: float = WAIT_PAST_GOAL_Y,
+        max_bat_speed: float = MAX_BAT_SPEED,
+        lift_steps: int = LIFT_STEPS,
+    ) -> None:
+        """Defaults suit ``pd_ee_delta_pose``; a slower arm (joint deltas) needs others.
+
+        ``align_tol_per_speed``: extra tolerance (m per m/step of ball speed beyond
+        ``SLOW_BALL``) on being beside the ball before the strike, for a hand that trails
+        a fast ball.
+        ``wait_past_goal_y``: meet the ball before it is this far short of the target's y.
+        ``max_bat_speed``: the fastest bat (m per step) a strike may plan.
+        ``lift_steps``: steps the hand rises after a strike before it judges the new path.
+        """
+        self.align_tol_per_speed = align_tol_per_speed
+        self.wait_past_goal_y = wait_past_goal_y
+        self.max_bat_speed = max_bat_speed
+        self.lift_steps = lift_steps
+        super().__init__(env, gain)
+
     def reset(self) -> None:
         """Forget the previous episode."""
         super().reset()
@@ -350,13 +374,13 @@ class InterceptOracle(BallChaser):
         should leave along ``wanted`` at about its speed (per step, xy).
 
         Bat velocities ``velocity + s·(cos θ, sin θ)`` over the measured approach angles θ
-        and closing speeds s (the bat no faster than ``MAX_BAT_SPEED``). Among those expected
+        and closing speeds s (the bat no faster than ``max_bat_speed``). Among those expected
         to send the ball along ``wanted`` the leaving speed closest to the wanted one wins,
         with a penalty outside the best-measured angles; if none does, the closest direction.
         ``angles`` restricts the approach angles (default: all measured ones).
         """
         direction = wanted / max(np.linalg.norm(wanted), 1e-9)
-        theta, closing = np.meshgrid(self.APPROACH_ANGLES if angles is None else angles, np.arange(0.004, 2 * self.MAX_BAT_SPEED, 0.001))
+        theta, closing = np.meshgrid(self.APPROACH_ANGLES if angles is None else angles, np.arange(0.004, 2 * self.max_bat_speed, 0.001))
         theta, closing = theta.ravel(), closing.ravel()
         bats = velocity + closing[:, None] * np.stack([np.cos(theta), np.sin(theta)], axis=1)
         table = self.RESPONSE_FITS[int(velocity[1] >= self.SLOW_BALL)]
@@ -376,7 +400,7 @@ class InterceptOracle(BallChaser):
             )
         cross = direction[0] * leaving[:, 1] - direction[1] * leaving[:, 0]
         error = np.abs(np.arctan2(cross, leaving @ direction))
-        error[np.linalg.norm(bats, axis=1) > self.MAX_BAT_SPEED] = np.inf
+        error[np.linalg.norm(bats, axis=1) > self.max_bat_speed] = np.inf
         reliable = (theta >= self.RELIABLE_ANGLES[0]) & (theta <= self.RELIABLE_ANGLES[1])
         score = np.abs(np.linalg.norm(leaving, axis=1) - np.linalg.norm(wanted)) + self.UNRELIABLE_PENALTY * ~reliable
         score[error > self.AIM_ANGLE_TOL] = np.inf
@@ -419,7 +443,7 @@ class InterceptOracle(BallChaser):
 
     def _wait_y_range(self) -> tuple[float, float]:
         # Meet the ball before it passes the target's y: hitting it back is unreliable.
-        return self.WAIT_Y[0], min(self.WAIT_Y[1], float(self.goal_xy[1]) + self.WAIT_PAST_GOAL_Y)
+        return self.WAIT_Y[0], min(self.WAIT_Y[1], float(self.goal_xy[1]) + self.wait_past_goal_y)
 
     def _wait_margin(self) -> float:
         # A second hit starts from near the ball, low: less margin, so it comes sooner.
@@ -439,13 +463,19 @@ class InterceptOracle(BallChaser):
             self.stage = "descend"
         z = self.HOVER_Z
         if self.stage == "descend":
-            beside = np.linalg.norm(self.ball.positions[-1] + self.hand_offset - tcp[:2]) < self.ALIGN_TOL
+            # A hand at its top speed trails a fast ball; slow balls it follows exactly.
+            excess = max(float(np.linalg.norm(velocity)) - self.SLOW_BALL, 0.0)
+            tol = self.ALIGN_TOL + self.align_tol_per_speed * excess
+            beside = np.linalg.norm(self.ball.positions[-1] + self.hand_offset - tcp[:2]) < tol
             z = self.LOW_Z if beside else min(tcp[2], self.HOVER_Z)
             if beside and tcp[2] < self.LOW_Z + 0.008:
                 # Aim again from where the ball really is now, coming from the side chosen.
                 window = self.approach_angle + self.REAIM_WINDOW
                 self.bat_velocity, self.wanted_velocity = self._aim(self.ball.positions[-1], velocity, frame, window)
-                if np.linalg.norm(self.wanted_velocity - velocity) < self.MIN_CHANGE:
+                # A small change can still be needed: a slow ball far from the target
+                # passes wide of it by more than the aim tolerance. Hit it then too.
+                small = np.linalg.norm(self.wanted_velocity - velocity) < self.MIN_CHANGE
+                if small and not self._misses(self.ball.positions[-1], velocity, frame):
                     self.stage = "watch"
                 else:
                     self.stage, self.strike_frame = "strike", frame
@@ -472,7 +502,7 @@ class InterceptOracle(BallChaser):
 
     def _lift(self, tcp: np.ndarray, frame: int, velocity: np.ndarray) -> np.ndarray:
         """Slow down and rise clear of the ball, then watch its new path."""
-        if frame - self.lift_frame >= self.LIFT_STEPS:
+        if frame - self.lift_frame >= self.lift_steps:
             self.stage = "watch"
             self.ball.refit_from(self.lift_frame + 2)
         return track(tcp, np.array([*tcp[:2], self.HOVER_Z]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))

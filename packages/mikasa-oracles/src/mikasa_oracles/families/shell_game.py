@@ -208,6 +208,14 @@ class PickMugOracle(ShellGameOracle):
     GRIPPER_APPROACH = 0.2
     LIFT_TCP_Z = 0.20
     CLOSE_STEPS = 2
+    # Steps the descent may take before the fingers close wherever they are.
+    APPROACH_MAX_STEPS = 18
+
+    def __init__(self, env: Any, gain: float | None = None, approach_max_steps: int = APPROACH_MAX_STEPS) -> None:
+        """``approach_max_steps``: the descent's time limit (a slower arm, e.g. one acting in
+        joint deltas, needs more than the default)."""
+        self.approach_max_steps = approach_max_steps
+        super().__init__(env, gain)
 
     def _grasp_rotation(self, mug_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(handle direction in the world xy plane, TCP rotation with the fingers closing
@@ -238,7 +246,7 @@ class PickMugOracle(ShellGameOracle):
             lift = self.APPROACH_SLOPE * horizontal + self.APPROACH_LIFT_PER_RAD * over_turn
             goal[2] += min(lift, self.APPROACH_MAX_LIFT)
             action = self._move(tcp_pose, goal, self.GRIPPER_APPROACH, self.grasp_rotation)
-            self._advance(float(np.linalg.norm(grasp - tcp_pose[:3])) < 0.008, 18)
+            self._advance(float(np.linalg.norm(grasp - tcp_pose[:3])) < 0.008, self.approach_max_steps)
             return action
         if self.stage == 1:  # close on the handle
             action = self._move(tcp_pose, grasp, GRIPPER_CLOSED, self.grasp_rotation)
