@@ -1,4 +1,5 @@
-"""The PPO agents of the RL release: the state-only MLP (``AgentStateOnly``).
+"""The PPO agents of the RL release: the state-only MLP (``AgentStateOnly``) and the
+image agent (``NatureCNN`` features + MLP heads, ``Agent``) of ``ppo_baselines.md`` §4.
 
 ``AgentStateOnly`` is the network of the release's ``ppo_memtasks`` state baseline, whose
 ``final_success_ckpt.pt`` checkpoints the RL data collector replays
@@ -25,7 +26,9 @@ from torch.distributions.normal import Normal
 __all__ = [
     "CKPT_NAME",
     "CKPT_SUBDIR",
+    "Agent",
     "AgentStateOnly",
+    "NatureCNN",
     "find_checkpoints",
     "flatten_state_obs",
     "layer_init",
@@ -106,6 +109,91 @@ class AgentStateOnly(nn.Module):
         agent = cls(obs_dim, action_dim)
         agent.load_state_dict(state_dict)
         return agent
+
+
+class NatureCNN(nn.Module):
+    """Features of an image observation dict (``ppo_baselines.md`` §4.2), concatenated in
+    this order: ``rgb`` (uint8 ``(B, H, W, C)``) through the Nature DQN convs and a 256-wide
+    layer; each of ``oracle_info`` / ``task_cue`` / ``proprio`` present (in the
+    observation's key order) through one ReLU layer (64 / 64 / ``proprio_width``); ``state``
+    through one linear layer of 256."""
+
+    def __init__(self, sample_obs: Mapping[str, torch.Tensor], proprio_width: int = 128) -> None:
+        super().__init__()
+        extractors: dict[str, nn.Module] = {}
+        self.out_features = 0
+        if "rgb" in sample_obs:
+            channels = sample_obs["rgb"].shape[-1]
+            cnn = nn.Sequential(
+                nn.Conv2d(channels, 32, kernel_size=8, stride=4), nn.ReLU(),
+                nn.Conv2d(32, 64, kernel_size=4, stride=2), nn.ReLU(),
+                nn.Conv2d(64, 64, kernel_size=3, stride=1), nn.ReLU(),
+                nn.Flatten(),
+            )
+            with torch.no_grad():
+                n_flat = cnn(self._image(sample_obs["rgb"][:1])).shape[1]
+            extractors["rgb"] = nn.Sequential(cnn, nn.Sequential(nn.Linear(n_flat, 256), nn.ReLU()))
+            self.out_features += 256
+        widths = {"oracle_info": 64, "task_cue": 64, "proprio": proprio_width}
+        for key in sample_obs:
+            if key in widths:
+                d = int(np.prod(sample_obs[key].shape[1:]))
+                extractors[key] = nn.Sequential(nn.Linear(d, widths[key]), nn.ReLU())
+                self.out_features += widths[key]
+        if "state" in sample_obs:
+            extractors["state"] = nn.Linear(int(np.prod(sample_obs["state"].shape[1:])), 256)
+            self.out_features += 256
+        self.extractors = nn.ModuleDict(extractors)
+
+    @staticmethod
+    def _image(rgb: torch.Tensor) -> torch.Tensor:
+        return rgb.float().permute(0, 3, 1, 2) / 255.0
+
+    def forward(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """``(B, out_features)`` features of ``obs``."""
+        parts = []
+        for key, extractor in self.extractors.items():
+            x = self._image(obs[key]) if key == "rgb" else obs[key].float().reshape(obs[key].shape[0], -1)
+            parts.append(extractor(x))
+        return torch.cat(parts, dim=1)
+
+
+class Agent(nn.Module):
+    """PPO actor-critic for image observations: ``NatureCNN`` features, then critic
+    ``Linear(F, 512)-ReLU-Linear(512, 1)`` and actor mean ``Linear(F, 512)-ReLU-
+    Linear(512, action_dim)``; diagonal Gaussian with ``actor_logstd`` as ``AgentStateOnly``."""
+
+    def __init__(self, sample_obs: Mapping[str, torch.Tensor], action_dim: int) -> None:
+        super().__init__()
+        self.feature_net = NatureCNN(sample_obs)
+        width = self.feature_net.out_features
+        self.critic = nn.Sequential(layer_init(nn.Linear(width, 512)), nn.ReLU(), layer_init(nn.Linear(512, 1)))
+        self.actor_mean = nn.Sequential(
+            layer_init(nn.Linear(width, 512)), nn.ReLU(), layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2))
+        )
+        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * -0.5)
+
+    def get_value(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """V(obs), shape ``(B, 1)``."""
+        return self.critic(self.feature_net(obs))
+
+    def get_action(self, obs: Mapping[str, torch.Tensor], deterministic: bool = False) -> torch.Tensor:
+        """The mean action if ``deterministic``, else a Gaussian sample."""
+        mean = self.actor_mean(self.feature_net(obs))
+        if deterministic:
+            return mean
+        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
+
+    def get_action_and_value(
+        self, obs: Mapping[str, torch.Tensor], action: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
+        features = self.feature_net(obs)
+        mean = self.actor_mean(features)
+        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(features)
 
 
 def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:

@@ -1,0 +1,283 @@
+"""Many CPU-simulated RL envs behind one ``ManiSkillVectorEnv``-like object.
+
+The release's PPO trainers step 1,024 GPU-simulated envs as one batch. GPU PhysX is not
+available everywhere, so :class:`CpuVectorEnv` runs ``num_envs`` single CPU envs in worker
+processes (``mikasa_envs.workers``, the process loop the bench and the collectors use) and
+presents them as one batch: ``reset`` / ``step`` take and return batched torch tensors.
+
+Each sub-env is ``gym.make(<id>, num_envs=1, sim_backend="cpu")`` with the RL wrapper chain,
+wrapped in ManiSkill's own ``ManiSkillVectorEnv`` (auto-reset, ``ignore_terminations``,
+``record_metrics``), so episode bookkeeping (``final_observation``, ``final_info`` with
+``episode`` = ``success_once`` / ``return`` / ``episode_len`` / ...) is ManiSkill's; this
+module only ships the pieces between processes and stacks them. A worker process holds
+``num_envs / workers`` sub-envs and steps them one after another.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from mani_skill.utils.gym_utils import find_max_episode_steps_value
+
+__all__ = ["CpuVectorEnv", "SubEnvSpec", "default_vector_workers"]
+
+# Keys of a ManiSkillVectorEnv step's info that the trainers read.
+_FINAL_KEYS = ("final_observation", "final_info", "_final_info")
+
+
+def default_vector_workers(num_envs: int) -> int:
+    """One worker process per CPU core, at most one per sub-env."""
+    return max(1, min(num_envs, os.cpu_count() or 1))
+
+
+@dataclass(frozen=True)
+class SubEnvSpec:
+    """How a worker builds each of its sub-envs (picklable: it crosses to the workers)."""
+
+    env_id: str
+    mode: str = "state"
+    """An RL observation mode (``mikasa_robo_rl.wrappers.OBS_MODES``)."""
+    reward_mode: str = "normalized_dense"
+    control_mode: str = "pd_joint_delta_pos"
+    noop_steps: int = 1
+    reconfiguration_freq: int | None = None
+    ignore_terminations: bool = True
+    render_mode: str | None = None
+    make_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def make(self) -> gym.Env:
+        """One sub-env: ``gym.make`` on the CPU sim, the RL chain, ``ManiSkillVectorEnv``."""
+        from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
+
+        from mikasa_robo_rl.manifest import get_rl_task, unknown_rl_env_message
+        from mikasa_robo_rl.wrappers import apply_rl_wrappers, env_obs_mode
+
+        try:
+            get_rl_task(self.env_id)
+        except ValueError:
+            raise ValueError(unknown_rl_env_message(self.env_id)) from None
+        env = gym.make(
+            self.env_id,
+            num_envs=1,
+            obs_mode=env_obs_mode(self.mode),
+            control_mode=self.control_mode,
+            reward_mode=self.reward_mode,
+            render_mode=self.render_mode,
+            reconfiguration_freq=self.reconfiguration_freq,
+            sim_backend="cpu",
+            **self.make_kwargs,
+        )
+        try:
+            env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
+            return ManiSkillVectorEnv(env, 1, ignore_terminations=self.ignore_terminations, record_metrics=True)
+        except BaseException:
+            env.close()
+            raise
+
+
+def _to_numpy(tree: Any) -> Any:
+    """Tensors (nested in dicts) as numpy arrays, for the trip between processes."""
+    if isinstance(tree, Mapping):
+        return {k: _to_numpy(v) for k, v in tree.items()}
+    if torch.is_tensor(tree):
+        return tree.detach().cpu().numpy()
+    return tree
+
+
+class _SubEnvs:
+    """A worker's state: its sub-envs; jobs ``("reset", seeds)`` and ``("step", actions)``."""
+
+    def __init__(self, spec: SubEnvSpec, count: int) -> None:
+        self.envs = [spec.make() for _ in range(count)]
+
+    def run(self, job: tuple[str, Any]) -> list[Any]:
+        kind, payload = job
+        if kind == "reset":
+            return [_to_numpy(env.reset(seed=seed)) for env, seed in zip(self.envs, payload, strict=True)]
+        if kind == "step":
+            out = []
+            for env, action in zip(self.envs, payload, strict=True):
+                obs, reward, terminated, truncated, info = env.step(torch.as_tensor(action[None]))
+                kept = {k: info[k] for k in (*_FINAL_KEYS, "episode") if k in info}
+                out.append(_to_numpy((obs, reward, terminated, truncated, kept)))
+            return out
+        raise ValueError(f"unknown job {kind!r}")
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def _start_sub_envs(spec: SubEnvSpec, count: int) -> _SubEnvs:
+    # The workers already use the cores: one thread each (torch, Mesa's rasteriser).
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("LP_NUM_THREADS", "1")
+    import logging
+
+    logging.getLogger("mani_skill").setLevel(logging.ERROR)
+    torch.set_num_threads(1)
+    import mikasa_robo_rl  # noqa: F401  (registers the RL ids in the spawned interpreter)
+
+    return _SubEnvs(spec, count)
+
+
+def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, inbox: Any, outbox: Any) -> None:
+    from mikasa_envs.workers import serve_jobs
+
+    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count))
+
+
+def _stack(parts: list[Any], device: torch.device) -> Any:
+    """Per-sub-env numpy pieces (each with a leading batch of 1) as one batched tensor tree."""
+    first = parts[0]
+    if isinstance(first, Mapping):
+        return {k: _stack([p[k] for p in parts], device) for k in first}
+    return torch.from_numpy(np.concatenate([np.asarray(p) for p in parts], axis=0)).to(device)
+
+
+class CpuVectorEnv:
+    """``num_envs`` CPU sub-envs in ``workers`` processes, as one batched env.
+
+    Follows ``ManiSkillVectorEnv``: ``reset(seed=s)`` seeds sub-env i with the seed
+    ManiSkill gives env i of a batch reset with ``seed=s``; ``step(actions)`` takes a
+    ``(num_envs, action_dim)`` tensor and returns batched tensors on ``device``; a finished
+    sub-env resets itself and ``info`` then holds ``final_observation``, ``final_info``
+    (with ``episode`` metrics) and the mask ``_final_info``. ``single_observation_space`` /
+    ``single_action_space`` are a sub-env's. ``workers=0`` runs the sub-envs in this
+    process (tests, debugging).
+    """
+
+    def __init__(
+        self, spec: SubEnvSpec, num_envs: int, workers: int | None = None, device: str | torch.device = "cpu"
+    ) -> None:
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.spec, self.num_envs, self.device = spec, int(num_envs), torch.device(device)
+        workers = default_vector_workers(num_envs) if workers is None else int(workers)
+        if workers < 0:
+            raise ValueError(f"workers must be >= 0, got {workers}")
+        probe = spec.make()  # spaces, and a clear error for a bad id or mode before any fork
+        self.single_observation_space = probe.single_observation_space
+        self.single_action_space = probe.single_action_space
+        self.max_episode_steps = find_max_episode_steps_value(probe)
+        probe.close()
+        self._inline: _SubEnvs | None = None
+        self._processes: list[Any] = []
+        if workers == 0:
+            self._inline = _SubEnvs(spec, num_envs)
+            self._counts = [num_envs]
+            return
+        workers = min(workers, num_envs)
+        self._counts = [num_envs // workers + (w < num_envs % workers) for w in range(workers)]
+        ctx = mp.get_context("spawn")
+        self._outbox = ctx.Queue()
+        self._inboxes = [ctx.Queue() for _ in range(workers)]
+        self._processes = [
+            ctx.Process(target=_worker_main, args=(w, spec, n, inbox, self._outbox), daemon=True,
+                        name=f"mikasa-rl-env-{w}")
+            for w, (n, inbox) in enumerate(zip(self._counts, self._inboxes, strict=True))
+        ]
+        for p in self._processes:
+            p.start()
+        ready = 0
+        while ready < workers:
+            kind, wid, payload = self._receive()
+            if kind == "fatal":
+                self.close()
+                raise RuntimeError(f"env worker {wid} failed to start:\n{payload}")
+            ready += kind == "ready"
+
+    # ------------------------------------------------------------------ plumbing
+    def _receive(self) -> tuple[str, int, Any]:
+        while True:
+            try:
+                return self._outbox.get(timeout=1.0)
+            except queue.Empty:
+                dead = [p for p in self._processes if not p.is_alive()]
+                if dead:
+                    raise RuntimeError(f"env worker {dead[0].name} died (exit code {dead[0].exitcode})") from None
+
+    def _run_all(self, kind: str, payloads: list[Any]) -> list[Any]:
+        """Job ``kind`` on every sub-env (payload i for sub-env i); results in sub-env order."""
+        chunks, start = [], 0
+        for n in self._counts:
+            chunks.append(payloads[start : start + n])
+            start += n
+        if self._inline is not None:
+            return self._inline.run((kind, chunks[0]))
+        for inbox, chunk in zip(self._inboxes, chunks, strict=True):
+            inbox.put((kind, chunk))
+        results: dict[int, list[Any]] = {}
+        while len(results) < len(self._inboxes):
+            tag, wid, payload = self._receive()
+            if tag == "done":
+                results[wid] = payload
+        return [r for w in range(len(self._inboxes)) for r in results[w]]
+
+    # ------------------------------------------------------------------ the env API
+    def reset(self, seed: int | None = None) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+        """Reset every sub-env (seeded as ManiSkill seeds a batch, if ``seed`` is given)."""
+        from mikasa_robo_rl.collect import episode_seed
+
+        seeds = [None if seed is None else episode_seed(seed, i, self.num_envs) for i in range(self.num_envs)]
+        results = self._run_all("reset", seeds)
+        return _stack([obs for obs, _ in results], self.device), {}
+
+    def step(
+        self, actions: torch.Tensor | np.ndarray
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
+        """One step of every sub-env with ``actions`` ``(num_envs, action_dim)``."""
+        actions = np.asarray(actions.detach().cpu() if torch.is_tensor(actions) else actions, dtype=np.float32)
+        if actions.shape != (self.num_envs, *self.single_action_space.shape):
+            raise ValueError(
+                f"actions have shape {actions.shape}; expected {(self.num_envs, *self.single_action_space.shape)}"
+            )
+        if not np.isfinite(actions).all():
+            raise ValueError("actions contain NaN or inf")
+        results = self._run_all("step", list(actions))
+        obs = _stack([r[0] for r in results], self.device)
+        reward, terminated, truncated = (_stack([r[k] for r in results], self.device) for k in (1, 2, 3))
+        info: dict[str, Any] = {}
+        finished = [("_final_info" in r[4]) and bool(np.asarray(r[4]["_final_info"]).any()) for r in results]
+        if any(finished):
+            # Sub-envs that did not finish contribute their current observation and metrics
+            # (masked out by ``_final_info``), as ManiSkillVectorEnv's batch does.
+            info["final_observation"] = _stack(
+                [r[4]["final_observation"] if f else r[0] for r, f in zip(results, finished, strict=True)], self.device
+            )
+            info["final_info"] = {
+                "episode": _stack(
+                    [r[4]["final_info"]["episode"] if f else r[4]["episode"] for r, f in zip(results, finished, strict=True)],
+                    self.device,
+                )
+            }
+            info["_final_info"] = torch.tensor(finished, device=self.device)
+        return obs, reward, terminated, truncated, info
+
+    def close(self) -> None:
+        """Stop the workers (or close the in-process sub-envs)."""
+        if self._inline is not None:
+            self._inline.close()
+            self._inline = None
+        if self._processes:
+            from mikasa_envs.workers import stop_processes
+
+            for inbox in self._inboxes:
+                inbox.put(None)
+            stop_processes(self._processes, wait_s=3)
+            self._processes = []
+
+    def __enter__(self) -> CpuVectorEnv:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()

@@ -1,0 +1,127 @@
+"""The PPO baselines' batched CPU env and the PPO-MLP trainer (tiny runs)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV_ID = "RememberColor3-v0"  # horizon 60
+
+
+def _load_trainer():
+    path = ROOT / "legacy/rl/baselines/ppo/ppo_memtasks.py"
+    spec = importlib.util.spec_from_file_location("ppo_memtasks", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while building Args
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def ppo():
+    return _load_trainer()
+
+
+def _rollout(env: CpuVectorEnv, steps: int) -> tuple[dict, list[dict]]:
+    first, _ = env.reset(seed=5)
+    finals = []
+    for _ in range(steps):
+        _, reward, terminated, truncated, info = env.step(torch.full((env.num_envs, 8), 0.3))
+        assert reward.shape == (env.num_envs,) and reward.dtype == torch.float32
+        assert terminated.dtype == torch.bool and not terminated.any()  # ignore_terminations
+        if "final_info" in info:
+            finals.append({k: v.clone() for k, v in info["final_info"]["episode"].items()})
+            assert info["_final_info"].all() and truncated.all()
+            assert info["final_observation"]["state"].shape == (env.num_envs, 35)
+    return first, finals
+
+
+def test_vector_env_batches_sub_envs_and_matches_across_worker_counts():
+    spec = SubEnvSpec(ENV_ID)
+    with CpuVectorEnv(spec, 3, workers=0) as inline:
+        assert inline.max_episode_steps == 60 and inline.single_action_space.shape == (8,)
+        first_inline, finals_inline = _rollout(inline, 60)
+    with CpuVectorEnv(spec, 3, workers=2) as pooled:
+        first_pooled, finals_pooled = _rollout(pooled, 60)
+    assert first_inline["state"].shape == (3, 35) and first_inline["state"].dtype == torch.float32
+    assert torch.equal(first_inline["state"], first_pooled["state"])
+    assert len(finals_inline) == len(finals_pooled) == 1
+    for key in ("success_once", "return", "episode_len"):
+        assert torch.equal(finals_inline[0][key], finals_pooled[0][key])
+    assert finals_inline[0]["episode_len"].tolist() == [60, 60, 60]
+
+
+def test_vector_env_rejects_bad_actions():
+    with CpuVectorEnv(SubEnvSpec(ENV_ID), 2, workers=0) as env:
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match="shape"):
+            env.step(torch.zeros(3, 8))
+        with pytest.raises(ValueError, match="NaN"):
+            env.step(torch.full((2, 8), float("nan")))
+
+
+def test_vector_env_names_unknown_ids():
+    with pytest.raises(ValueError, match="Unknown environment"):
+        CpuVectorEnv(SubEnvSpec("RememberColour3-v0"), 1, workers=0)
+
+
+@pytest.mark.parametrize(
+    "flags, mode",
+    [
+        (["--include-state"], "state"),
+        (["--include-rgb"], "rgb"),
+        (["--include-rgb", "--include-oracle"], "rgb_oracle"),
+        (["--include_rgb", "--include_joints"], "rgb_joints"),
+        (["--include-rgb", "--include-joints", "--include-oracle"], "rgb_joints_oracle"),
+    ],
+)
+def test_mode_resolution(ppo, flags, mode):
+    assert ppo.observation_mode(ppo.parse_args(["--env_id=X-v0", *flags])) == mode
+
+
+@pytest.mark.parametrize(
+    "flags, error",
+    [
+        ([], ValueError),
+        (["--include-joints", "--include-state"], ValueError),
+        (["--include-state", "--include-rgb"], NotImplementedError),
+        (["--include-state", "--include-oracle"], NotImplementedError),
+    ],
+)
+def test_mode_errors(ppo, flags, error):
+    with pytest.raises(error):
+        ppo.observation_mode(ppo.parse_args(flags))
+
+
+def test_underscore_and_dash_spellings_agree(ppo):
+    a = ppo.parse_args(["--env_id=RememberColor3-v0", "--total_timesteps=100", "--num_eval_steps", "5"])
+    b = ppo.parse_args(["--env-id", "RememberColor3-v0", "--total-timesteps", "100", "--num-eval-steps=5"])
+    assert a == b and a.total_timesteps == 100 and a.num_eval_steps == 5
+
+
+TINY = ["--num-envs", "2", "--num-eval-envs", "1", "--num-steps", "8", "--num-eval-steps", "8",
+        "--total-timesteps", "32", "--num-minibatches", "2", "--num-workers", "0", "--no-capture-video"]
+
+
+def test_state_trainer_runs_two_iterations_and_reloads_its_checkpoint(ppo, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ppo.main(["--env-id", ENV_ID, "--include-state", *TINY])
+    checkpoints = sorted(tmp_path.rglob("*.pt"))
+    assert [p.name for p in checkpoints] == ["ckpt_0_1.pt", "final_ckpt.pt"]
+    assert any(tmp_path.rglob("events.out.tfevents.*"))
+    result = ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--evaluate", "--checkpoint", str(checkpoints[-1])])
+    assert result["episodes"] == 0 and "success_once" not in result  # 8 steps < the horizon
+
+
+def test_rgb_joints_trainer_runs_two_iterations(ppo, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ppo.main(["--env-id", ENV_ID, "--include-rgb", "--include-joints", *TINY])
+    state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
+    assert state["feature_net.extractors.rgb.1.0.weight"].shape == (256, 9216)
+    assert state["feature_net.extractors.proprio.0.weight"].shape == (128, 25)
