@@ -88,6 +88,8 @@ def _to_numpy(tree: Any) -> Any:
     """Tensors (nested in dicts) as numpy arrays, for the trip between processes."""
     if isinstance(tree, Mapping):
         return {k: _to_numpy(v) for k, v in tree.items()}
+    if isinstance(tree, tuple):
+        return tuple(_to_numpy(v) for v in tree)
     if torch.is_tensor(tree):
         return tree.detach().cpu().numpy()
     return tree
@@ -107,7 +109,10 @@ class _SubEnvs:
             out = []
             for env, action in zip(self.envs, payload, strict=True):
                 obs, reward, terminated, truncated, info = env.step(torch.as_tensor(action[None]))
-                kept = {k: info[k] for k in (*_FINAL_KEYS, "episode") if k in info}
+                # Only what the trainers read crosses back: final observation and metrics.
+                kept = {k: info[k] for k in _FINAL_KEYS if k in info}
+                if "final_info" in kept:
+                    kept["final_info"] = {"episode": kept["final_info"]["episode"]}
                 out.append(_to_numpy((obs, reward, terminated, truncated, kept)))
             return out
         raise ValueError(f"unknown job {kind!r}")
