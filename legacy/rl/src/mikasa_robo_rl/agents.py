@@ -131,7 +131,7 @@ class NatureCNN(nn.Module):
                 nn.Flatten(),
             )
             with torch.no_grad():
-                n_flat = cnn(self._image(sample_obs["rgb"][:1])).shape[1]
+                n_flat = cnn(self._image(sample_obs["rgb"][:1].cpu())).shape[1]
             extractors["rgb"] = nn.Sequential(cnn, nn.Sequential(nn.Linear(n_flat, 256), nn.ReLU()))
             self.out_features += 256
         widths = {"oracle_info": 64, "task_cue": 64, "proprio": proprio_width}
