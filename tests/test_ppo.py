@@ -82,7 +82,7 @@ def test_vector_env_names_unknown_ids():
     ],
 )
 def test_mode_resolution(ppo, flags, mode):
-    assert ppo.observation_mode(ppo.parse_args(["--env_id=X-v0", *flags])) == mode
+    assert ppo.observation_mode(ppo.parse_args(ppo.Args, ["--env_id=X-v0", *flags])) == mode
 
 
 @pytest.mark.parametrize(
@@ -96,12 +96,12 @@ def test_mode_resolution(ppo, flags, mode):
 )
 def test_mode_errors(ppo, flags, error):
     with pytest.raises(error):
-        ppo.observation_mode(ppo.parse_args(flags))
+        ppo.observation_mode(ppo.parse_args(ppo.Args, flags))
 
 
 def test_underscore_and_dash_spellings_agree(ppo):
-    a = ppo.parse_args(["--env_id=RememberColor3-v0", "--total_timesteps=100", "--num_eval_steps", "5"])
-    b = ppo.parse_args(["--env-id", "RememberColor3-v0", "--total-timesteps", "100", "--num-eval-steps=5"])
+    a = ppo.parse_args(ppo.Args, ["--env_id=RememberColor3-v0", "--total_timesteps=100", "--num_eval_steps", "5"])
+    b = ppo.parse_args(ppo.Args, ["--env-id", "RememberColor3-v0", "--total-timesteps", "100", "--num-eval-steps=5"])
     assert a == b and a.total_timesteps == 100 and a.num_eval_steps == 5
 
 

@@ -4,7 +4,8 @@
 The recipe is ManiSkill3's / CleanRL's PPO (finite-horizon GAE, no termination, one batch
 of ``num_envs`` envs). Upstream steps 1,024 GPU-simulated envs; here ``num_envs`` CPU envs
 run in worker processes behind one batched env (``mikasa_robo_rl.vector_env``), and the
-networks run on the GPU when there is one.
+networks run on the GPU when there is one. Flags, mode rules, advantages, envs and logs:
+``mikasa_robo_rl.ppo``; this file is the algorithm.
 
     python legacy/rl/baselines/ppo/ppo_memtasks.py --env-id RememberColor3-v0 --include-state \\
         --num-envs 16 --num-steps 60 --total-timesteps 2_000_000
@@ -17,7 +18,6 @@ Needs ``pip install "mikasa-robo-rl[train]"`` (tyro, TensorBoard); ``--track`` a
 
 from __future__ import annotations
 
-import os
 import random
 import sys
 import time
@@ -27,153 +27,28 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import tyro
-from torch import nn, optim
-
 from mikasa_robo_rl.agents import Agent, AgentStateOnly, flatten_state_obs
 from mikasa_robo_rl.manifest import get_rl_task
-from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
-
-if Path("wandb_config.yaml").exists():  # the release's way of passing the W&B key
-    import yaml
-
-    os.environ["WANDB_API_KEY"] = yaml.safe_load(Path("wandb_config.yaml").read_text())["wandb_api"]
+from mikasa_robo_rl.ppo import (
+    PPOArgs,
+    RunLog,
+    finite_horizon_advantages,
+    gae_advantages,
+    make_envs,
+    observation_mode,
+    parse_args,
+    run_directory,
+)
+from torch import nn, optim
 
 
 @dataclass
-class Args:
-    exp_name: str | None = None
-    """the name of this experiment (part of the run name)"""
-    seed: int = 123
-    """seed of python, numpy, torch and the first env reset"""
-    torch_deterministic: bool = True
-    """torch.backends.cudnn.deterministic"""
-    cuda: bool = True
-    """run the networks on CUDA when available"""
-    track: bool = False
-    """log to Weights & Biases (needs wandb)"""
-    wandb_project_name: str = "ManiSkill-MemoryBench"
-    wandb_entity: str | None = None
-    capture_video: bool = True
-    """record eval videos (not yet implemented for CPU envs: ignored, with a notice)"""
-    save_model: bool = True
-    """write checkpoints"""
-    evaluate: bool = False
-    """only evaluate --checkpoint"""
-    checkpoint: str | None = None
-    """a state_dict to load before training or evaluation"""
-    render_mode: str = "all"
-    env_id: str = "ShellGamePush-v1"
-    """the RL task id (the release's default is not an id: always pass one)"""
-    include_state: bool = False
-    """privileged state observation (MODE state)"""
-    total_timesteps: int = 50_000_000
-    learning_rate: float = 3e-4
-    num_envs: int = 1024
-    """parallel training envs (CPU sub-envs in worker processes; 1 with --evaluate)"""
-    num_eval_envs: int = 16
-    partial_reset: bool = False
-    """reset training envs on termination (else only on the time limit)"""
-    eval_partial_reset: bool = False
-    num_steps: int = 90
-    """rollout length per iteration, per env"""
-    num_eval_steps: int = 270
-    reconfiguration_freq: int | None = None
-    eval_reconfiguration_freq: int | None = 1
-    anneal_lr: bool = False
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    num_minibatches: int = 32
-    update_epochs: int = 4
-    norm_adv: bool = True
-    clip_coef: float = 0.2
-    clip_vloss: bool = False
-    ent_coef: float = 0.0
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    target_kl: float | None = 0.2
-    reward_scale: float = 1.0
-    eval_freq: int = 25
-    """evaluate and checkpoint when iteration % eval_freq == 1"""
-    save_train_video_freq: int | None = None
-    finite_horizon_gae: bool = True
-    batch_size: int = 0
-    """set at runtime: num_envs * num_steps"""
-    minibatch_size: int = 0
-    """set at runtime: batch_size // num_minibatches"""
-    num_iterations: int = 0
-    """set at runtime: total_timesteps // batch_size"""
-    include_oracle: bool = False
-    """add oracle_info to image observations"""
-    noop_steps: int = 1
-    """InitialZeroActionWrapper(n_initial_steps=noop_steps - 1); 1 = no no-op steps"""
-    include_rgb: bool = False
-    include_joints: bool = False
-    """proprioception with the images (needs --include-rgb)"""
-    reward_mode: str = "normalized_dense"
-    num_workers: int | None = None
-    """env worker processes (default: one per CPU core, at most one per env); 0 = in this process"""
-
-
-def observation_mode(args: Args) -> str:
-    """MODE of ``ppo_baselines.md`` §3.1 from the include flags (its errors included)."""
-    if not (args.include_state or args.include_rgb):
-        raise ValueError("at least one of --include-state / --include-rgb is needed")
-    if args.include_joints and not args.include_rgb:
-        raise ValueError("--include-joints needs --include-rgb")
-    if args.include_state and args.include_rgb:
-        raise NotImplementedError("state + rgb observations are not supported")
-    if args.include_state:
-        if args.include_oracle:
-            raise NotImplementedError("the state already contains the oracle information")
-        return "state"
-    return "rgb" + ("_joints" if args.include_joints else "") + ("_oracle" if args.include_oracle else "")
-
-
-def parse_args(argv: list[str]) -> Args:
-    """tyro's parse, also accepting the run scripts' underscore spellings (``--env_id``)."""
-    dashed = []
-    for a in argv:
-        if a.startswith("--"):
-            name, eq, value = a.partition("=")
-            a = name.replace("_", "-") + eq + value
-        dashed.append(a)
-    return tyro.cli(Args, args=dashed)
-
-
-def finite_horizon_advantages(rewards, values, dones, final_values, next_value, next_done, gamma, lam):
-    """``ppo_baselines.md`` §5.2, finite-horizon variant: per step, the λ-weighted average of
-    the n-step returns still inside the episode, normalised by the weights available."""
-    num_steps = rewards.shape[0]
-    advantages = torch.zeros_like(rewards)
-    lam_sum = rew_sum = val_sum = torch.zeros_like(next_value)
-    for t in reversed(range(num_steps)):
-        not_done = 1.0 - (next_done if t == num_steps - 1 else dones[t + 1])
-        following = next_value if t == num_steps - 1 else values[t + 1]
-        real_next_value = not_done * following + final_values[t]
-        lam_sum, rew_sum, val_sum = lam_sum * not_done, rew_sum * not_done, val_sum * not_done
-        lam_sum = 1 + lam * lam_sum
-        rew_sum = lam * gamma * rew_sum + lam_sum * rewards[t]
-        val_sum = lam * gamma * val_sum + gamma * real_next_value
-        advantages[t] = (rew_sum + val_sum) / lam_sum - values[t]
-    return advantages
-
-
-def gae_advantages(rewards, values, dones, final_values, next_value, next_done, gamma, lam):
-    """Standard GAE (``--no-finite-horizon-gae``)."""
-    num_steps = rewards.shape[0]
-    advantages = torch.zeros_like(rewards)
-    last = torch.zeros_like(next_value)
-    for t in reversed(range(num_steps)):
-        not_done = 1.0 - (next_done if t == num_steps - 1 else dones[t + 1])
-        following = next_value if t == num_steps - 1 else values[t + 1]
-        delta = rewards[t] + gamma * (not_done * following + final_values[t]) - values[t]
-        advantages[t] = last = delta + gamma * lam * not_done * last
-    return advantages
+class Args(PPOArgs):
+    """Every flag of ``ppo_baselines.md`` §2 (see ``mikasa_robo_rl.ppo.PPOArgs``)."""
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
-    args = parse_args(sys.argv[1:] if argv is None else argv)
+    args = parse_args(Args, sys.argv[1:] if argv is None else argv)
     mode = observation_mode(args)
     horizon = get_rl_task(args.env_id).max_episode_steps  # unknown ids fail here, naming close ones
     if args.evaluate and not args.checkpoint:
@@ -186,10 +61,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         raise ValueError(f"num_envs * num_steps = {args.batch_size} is smaller than num_minibatches = {args.num_minibatches}")
     if args.capture_video:
         print("note: --capture-video is not implemented for CPU envs yet; no videos are written")
-    stamp = time.strftime("%Y%m%d_%H%M%S")
-    script = Path(__file__).stem
-    run_name = (f"{args.exp_name}" if args.exp_name else f"{args.env_id}__{script}") + f"__{args.seed}__{mode}__{stamp}"
-    save_dir = Path("checkpoints/ppo_memtasks") / mode / args.reward_mode / args.env_id / run_name / stamp
+    run_name, save_dir = run_directory(args, mode, Path(__file__).stem)
 
     # Seeding, device.
     random.seed(args.seed)
@@ -198,36 +70,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
-    # Envs: CPU sub-envs in worker processes, batched (ManiSkillVectorEnv's interface).
-    def spec(reconfiguration_freq, partial_reset):
-        return SubEnvSpec(
-            args.env_id, mode, reward_mode=args.reward_mode, noop_steps=args.noop_steps,
-            reconfiguration_freq=reconfiguration_freq, ignore_terminations=not partial_reset,
-        )
-
-    envs = CpuVectorEnv(spec(args.reconfiguration_freq, args.partial_reset), num_envs, args.num_workers, device)
-    eval_envs = CpuVectorEnv(
-        spec(args.eval_reconfiguration_freq, args.eval_partial_reset), args.num_eval_envs, args.num_workers, device
-    )
+    # Envs (CPU sub-envs in worker processes, batched) and logs.
+    envs, eval_envs = make_envs(args, mode, num_envs, device)
     print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
-
-    # Logging.
-    from torch.utils.tensorboard import SummaryWriter
-
-    writer = SummaryWriter(str(save_dir))
-    writer.add_text(
-        "hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(f"|{k}|{v}|" for k, v in vars(args).items())
-    )
-    if args.track:
-        import wandb
-
-        wandb.init(project=args.wandb_project_name, entity=args.wandb_entity, config=vars(args), name=run_name,
-                   group="PPO", tags=["ppo", "walltime_efficient"], save_code=True)
-
-    def log(name: str, value: float, step: int) -> None:
-        writer.add_scalar(name, value, step)
-        if args.track:
-            wandb.log({name: value}, step=step)
+    run_log = RunLog(args, run_name, save_dir)
+    log = run_log.scalar
 
     # Agent.
     next_obs, _ = envs.reset(seed=args.seed)
@@ -274,7 +121,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
     if args.evaluate:
         result = evaluate(0)
-        envs.close(), eval_envs.close(), writer.close()
+        envs.close(), eval_envs.close(), run_log.close()
         return result
 
     global_step, start_time, saves, last_eval = 0, time.time(), 0, {}
@@ -389,7 +236,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         save_dir.mkdir(parents=True, exist_ok=True)
         torch.save(agent.state_dict(), save_dir / "final_ckpt.pt")
         print(f"checkpoints in {save_dir}")
-    envs.close(), eval_envs.close(), writer.close()
+    envs.close(), eval_envs.close(), run_log.close()
     return last_eval
 
 
