@@ -14,9 +14,9 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV_ID = "RememberColor3-v0"  # horizon 60
 
 
-def _load_trainer():
-    path = ROOT / "legacy/rl/baselines/ppo/ppo_memtasks.py"
-    spec = importlib.util.spec_from_file_location("ppo_memtasks", path)
+def _load_trainer(name: str = "ppo_memtasks"):
+    path = ROOT / f"legacy/rl/baselines/ppo/{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up while building Args
     spec.loader.exec_module(module)
@@ -26,6 +26,11 @@ def _load_trainer():
 @pytest.fixture(scope="module")
 def ppo():
     return _load_trainer()
+
+
+@pytest.fixture(scope="module")
+def ppo_lstm():
+    return _load_trainer("ppo_memtasks_lstm")
 
 
 def _rollout(env: CpuVectorEnv, steps: int) -> tuple[dict, list[dict]]:
@@ -125,3 +130,24 @@ def test_rgb_joints_trainer_runs_two_iterations(ppo, tmp_path, monkeypatch):
     state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
     assert state["feature_net.extractors.rgb.1.0.weight"].shape == (256, 9216)
     assert state["feature_net.extractors.proprio.0.weight"].shape == (128, 25)
+
+
+def test_lstm_trainer_runs_two_iterations_in_rgb_joints(ppo_lstm, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ppo_lstm.main(["--env-id", ENV_ID, "--include-rgb", "--include-joints", *TINY, "--lstm-hidden-size", "32"])
+    state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
+    assert state["lstm.weight_hh_l0"].shape == (4 * 32, 32)
+    assert state["feature_net.extractors.proprio.0.weight"].shape == (256, 25)  # 256 wide in the LSTM script
+
+
+@pytest.mark.parametrize(
+    "flags, error, match",
+    [
+        (["--include-state"], NotImplementedError, "image observations"),
+        (["--include-rgb", "--num-envs", "3", "--num-minibatches", "2"], ValueError, "multiple of num_minibatches"),
+    ],
+)
+def test_lstm_trainer_rejects(ppo_lstm, tmp_path, monkeypatch, flags, error, match):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(error, match=match):
+        ppo_lstm.main(["--env-id", ENV_ID, *flags, "--no-capture-video"])

@@ -21,7 +21,6 @@ from __future__ import annotations
 import random
 import sys
 import time
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,13 +31,16 @@ from mikasa_robo_rl.manifest import get_rl_task
 from mikasa_robo_rl.ppo import (
     PPOArgs,
     RunLog,
+    clipped_ppo_loss,
     finite_horizon_advantages,
     gae_advantages,
+    log_iteration,
     make_envs,
     observation_mode,
     parse_args,
     run_directory,
 )
+from mikasa_robo_rl.ppo import evaluate as ppo_evaluate
 from torch import nn, optim
 
 
@@ -78,7 +80,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
     # Agent.
     next_obs, _ = envs.reset(seed=args.seed)
-    eval_obs, _ = eval_envs.reset(seed=args.seed)
+    eval_envs.reset(seed=args.seed)
     action_dim = int(np.prod(envs.single_action_space.shape))
     if mode == "state":
         agent = AgentStateOnly(flatten_state_obs(next_obs).shape[1], action_dim).to(device)
@@ -99,25 +101,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     values = torch.zeros((args.num_steps, num_envs), device=device)
 
     def evaluate(global_step: int) -> dict[str, float]:
-        """One pass of num_eval_steps deterministic steps; mean of each finished-episode metric."""
-        nonlocal eval_obs
-        metrics = defaultdict(list)
-        eval_obs, _ = eval_envs.reset()
         agent.eval()
-        for _ in range(args.num_eval_steps):
-            with torch.no_grad():
-                eval_obs, _, _, _, info = eval_envs.step(agent.get_action(agent_input(eval_obs), deterministic=True))
-            if "final_info" in info:
-                mask = info["_final_info"]
-                for k, v in info["final_info"]["episode"].items():
-                    metrics[k].append(v[mask].float())
+        result = ppo_evaluate(eval_envs, lambda obs, done: agent.get_action(agent_input(obs), deterministic=True),
+                              args.num_eval_steps, run_log, global_step)
         agent.train()
-        means = {k: torch.cat(v).mean().item() for k, v in metrics.items()}
-        episodes = len(torch.cat(metrics["success_once"])) if metrics else 0
-        print(f"eval @ {global_step}: {episodes} episodes, " + ", ".join(f"{k} {v:.3f}" for k, v in means.items()))
-        for k, v in means.items():
-            log(f"eval/{k}", v, global_step)
-        return means | {"episodes": episodes}
+        return result
 
     if args.evaluate:
         result = evaluate(0)
@@ -184,28 +172,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 _, newlogprob, entropy, newvalue = agent.get_action_and_value(
                     agent_input({k: v[mb] for k, v in b_obs.items()}), b_actions[mb]
                 )
-                logratio = newlogprob - b_logprobs[mb]
-                ratio = logratio.exp()
-                with torch.no_grad():
-                    old_approx_kl = (-logratio).mean()
-                    approx_kl = ((ratio - 1) - logratio).mean()
-                    clipfracs.append(((ratio - 1.0).abs() > args.clip_coef).float().mean().item())
-                if args.target_kl is not None and approx_kl > args.target_kl:
+                loss, stats = clipped_ppo_loss(args, newlogprob, entropy, newvalue, b_logprobs[mb],
+                                               b_advantages[mb], b_returns[mb], b_values[mb])
+                clipfracs.append(stats["clipfrac"].item())
+                if args.target_kl is not None and stats["approx_kl"] > args.target_kl:
                     stop = True  # upstream checks before stepping: this minibatch is skipped
                     break
-                mb_advantages = b_advantages[mb]
-                if args.norm_adv:
-                    mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
-                pg_loss = torch.max(
-                    -mb_advantages * ratio, -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
-                ).mean()
-                newvalue = newvalue.view(-1)
-                if args.clip_vloss:
-                    clipped = b_values[mb] + torch.clamp(newvalue - b_values[mb], -args.clip_coef, args.clip_coef)
-                    v_loss = 0.5 * torch.max((newvalue - b_returns[mb]) ** 2, (clipped - b_returns[mb]) ** 2).mean()
-                else:
-                    v_loss = 0.5 * ((newvalue - b_returns[mb]) ** 2).mean()
-                loss = pg_loss - args.ent_coef * entropy.mean() + v_loss * args.vf_coef
                 optimizer.zero_grad()
                 loss.backward()
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
@@ -214,20 +186,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 break
         update_time = time.time() - update_start
 
-        y_pred, y_true = b_values.cpu().numpy(), b_returns.cpu().numpy()
-        var_y = np.var(y_true)
-        explained_var = np.nan if var_y == 0 else 1 - np.var(y_true - y_pred) / var_y
         sps = int(global_step / (time.time() - start_time))
-        for name, value in {
-            "charts/learning_rate": optimizer.param_groups[0]["lr"], "charts/global_step": global_step,
-            "losses/value_loss": v_loss.item(), "losses/policy_loss": pg_loss.item(),
-            "losses/entropy": entropy.mean().item(), "losses/old_approx_kl": old_approx_kl.item(),
-            "losses/approx_kl": approx_kl.item(), "losses/clipfrac": float(np.mean(clipfracs)) if clipfracs else 0.0,
-            "losses/explained_variance": explained_var, "charts/SPS": sps,
-            "time/step": global_step, "time/update_time": update_time, "time/rollout_time": rollout_time,
-            "time/rollout_fps": num_envs * args.num_steps / rollout_time,
-        }.items():
-            log(name, value, global_step)
+        log_iteration(run_log, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values, b_returns,
+                      sps, rollout_time, update_time, num_envs * args.num_steps)
         print(f"iteration {iteration}/{args.num_iterations}: step {global_step}, SPS {sps}, "
               f"rollout {rollout_time:.1f} s, update {update_time:.1f} s", flush=True)
 

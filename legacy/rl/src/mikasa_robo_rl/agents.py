@@ -27,6 +27,7 @@ __all__ = [
     "CKPT_NAME",
     "CKPT_SUBDIR",
     "Agent",
+    "AgentLSTM",
     "AgentStateOnly",
     "NatureCNN",
     "find_checkpoints",
@@ -194,6 +195,84 @@ class Agent(nn.Module):
         if action is None:
             action = probs.sample()
         return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(features)
+
+
+LSTMState = tuple[torch.Tensor, torch.Tensor]
+
+
+class AgentLSTM(nn.Module):
+    """PPO-LSTM actor-critic (``ppo_baselines.md`` §4.3): ``NatureCNN`` features (proprio
+    width 256), an LSTM (orthogonal weights, zero biases), then critic and actor-mean heads
+    ``Linear(H, 512)-ReLU-Linear(512, out)`` on its output; ``actor_logstd`` as the others.
+
+    Inputs are batches of ``T * B`` observations, time-major (``B`` = the recurrent state's
+    batch); ``done`` marks observations that start a new episode: the state is zeroed there.
+    """
+
+    def __init__(
+        self, sample_obs: Mapping[str, torch.Tensor], action_dim: int, hidden_size: int = 512,
+        num_layers: int = 1, dropout: float = 0.0,
+    ) -> None:
+        super().__init__()
+        self.feature_net = NatureCNN(sample_obs, proprio_width=256)
+        self.lstm = nn.LSTM(self.feature_net.out_features, hidden_size, num_layers=num_layers, dropout=dropout)
+        for name, param in self.lstm.named_parameters():
+            if "bias" in name:
+                nn.init.constant_(param, 0)
+            elif "weight" in name:
+                nn.init.orthogonal_(param, 1.0)
+        self.critic = nn.Sequential(layer_init(nn.Linear(hidden_size, 512)), nn.ReLU(), layer_init(nn.Linear(512, 1)))
+        self.actor_mean = nn.Sequential(
+            layer_init(nn.Linear(hidden_size, 512)), nn.ReLU(),
+            layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2)),
+        )
+        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * -0.5)
+
+    def initial_state(self, batch: int, device: torch.device | str = "cpu") -> LSTMState:
+        """Zero ``(h, c)`` for ``batch`` envs."""
+        shape = (self.lstm.num_layers, batch, self.lstm.hidden_size)
+        return torch.zeros(shape, device=device), torch.zeros(shape, device=device)
+
+    def get_states(
+        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor
+    ) -> tuple[torch.Tensor, LSTMState]:
+        """LSTM outputs ``(T * B, H)`` for time-major ``obs`` and the final state."""
+        features = self.feature_net(obs)
+        batch = state[0].shape[1]
+        features = features.reshape((-1, batch, self.lstm.input_size))
+        done = done.reshape((-1, batch))
+        outputs = []
+        for x, d in zip(features, done, strict=True):
+            keep = (1.0 - d).view(1, -1, 1)
+            out, state = self.lstm(x.unsqueeze(0), (keep * state[0], keep * state[1]))
+            outputs.append(out)
+        return torch.flatten(torch.cat(outputs), 0, 1), state
+
+    def get_value(self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor) -> torch.Tensor:
+        """V, shape ``(T * B, 1)``."""
+        hidden, _ = self.get_states(obs, state, done)
+        return self.critic(hidden)
+
+    def get_action(
+        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor, deterministic: bool = False
+    ) -> tuple[torch.Tensor, LSTMState]:
+        """(action, new state): the mean if ``deterministic``, else a Gaussian sample."""
+        hidden, state = self.get_states(obs, state, done)
+        mean = self.actor_mean(hidden)
+        if deterministic:
+            return mean, state
+        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample(), state
+
+    def get_action_and_value(
+        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor, action: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, LSTMState]:
+        """``(action, log_prob, entropy, value, new state)`` as PPO's update needs them."""
+        hidden, state = self.get_states(obs, state, done)
+        mean = self.actor_mean(hidden)
+        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(hidden), state
 
 
 def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:

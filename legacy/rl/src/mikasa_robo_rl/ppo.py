@@ -8,17 +8,20 @@ from __future__ import annotations
 
 import os
 import time
+from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
 import torch
 import tyro
 
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
 __all__ = [
-    "PPOArgs", "RunLog", "finite_horizon_advantages", "gae_advantages", "make_envs", "observation_mode",
+    "PPOArgs", "RunLog", "clipped_ppo_loss", "evaluate", "finite_horizon_advantages", "log_iteration", "gae_advantages", "make_envs", "observation_mode",
     "parse_args", "run_directory",
 ]
 
@@ -221,3 +224,93 @@ class RunLog:
         self.writer.close()
         if self.wandb is not None:
             self.wandb.finish()
+
+
+def clipped_ppo_loss(
+    args: PPOArgs,
+    newlogprob: torch.Tensor,
+    entropy: torch.Tensor,
+    newvalue: torch.Tensor,
+    logprobs: torch.Tensor,
+    advantages: torch.Tensor,
+    returns: torch.Tensor,
+    values: torch.Tensor,
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """PPO's minibatch loss (§5.3): clipped policy loss, (clipped) value loss, entropy bonus.
+
+    Returns the loss and its parts: ``pg_loss``, ``v_loss``, ``entropy``, ``old_approx_kl``,
+    ``approx_kl``, ``clipfrac`` (the last three without gradients).
+    """
+    logratio = newlogprob - logprobs
+    ratio = logratio.exp()
+    with torch.no_grad():
+        stats = dict(
+            old_approx_kl=(-logratio).mean(),
+            approx_kl=((ratio - 1) - logratio).mean(),
+            clipfrac=((ratio - 1.0).abs() > args.clip_coef).float().mean(),
+        )
+    if args.norm_adv:
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    pg_loss = torch.max(
+        -advantages * ratio, -advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
+    ).mean()
+    newvalue = newvalue.view(-1)
+    if args.clip_vloss:
+        clipped = values + torch.clamp(newvalue - values, -args.clip_coef, args.clip_coef)
+        v_loss = 0.5 * torch.max((newvalue - returns) ** 2, (clipped - returns) ** 2).mean()
+    else:
+        v_loss = 0.5 * ((newvalue - returns) ** 2).mean()
+    loss = pg_loss - args.ent_coef * entropy.mean() + v_loss * args.vf_coef
+    return loss, stats | dict(pg_loss=pg_loss, v_loss=v_loss, entropy=entropy.mean())
+
+
+def log_iteration(
+    log: RunLog, step: int, lr: float, stats: dict[str, torch.Tensor], clipfracs: list[float],
+    values: torch.Tensor, returns: torch.Tensor, sps: int, rollout_time: float, update_time: float,
+    rollout_steps: int,
+) -> None:
+    """The per-iteration scalars of §5.3 (losses from the last minibatch, as upstream)."""
+    y_pred, y_true = values.cpu().numpy(), returns.cpu().numpy()
+    var_y = np.var(y_true)
+    scalars = {
+        "charts/learning_rate": lr, "charts/global_step": step,
+        "losses/value_loss": stats["v_loss"].item(), "losses/policy_loss": stats["pg_loss"].item(),
+        "losses/entropy": stats["entropy"].item(), "losses/old_approx_kl": stats["old_approx_kl"].item(),
+        "losses/approx_kl": stats["approx_kl"].item(),
+        "losses/clipfrac": float(np.mean(clipfracs)) if clipfracs else 0.0,
+        "losses/explained_variance": np.nan if var_y == 0 else 1 - np.var(y_true - y_pred) / var_y,
+        "charts/SPS": sps, "time/step": step, "time/update_time": update_time,
+        "time/rollout_time": rollout_time, "time/rollout_fps": rollout_steps / rollout_time,
+    }
+    for name, value in scalars.items():
+        log.scalar(name, value, step)
+
+
+def evaluate(
+    eval_envs: CpuVectorEnv,
+    policy: Callable[[dict[str, torch.Tensor], torch.Tensor], torch.Tensor],
+    num_eval_steps: int,
+    log: RunLog,
+    global_step: int,
+) -> dict[str, float]:
+    """One evaluation pass (§6): reset the eval envs, run ``num_eval_steps`` steps of
+    ``policy(obs, done)`` (deterministic actions; ``done`` marks observations that start an
+    episode), log the mean of each finished episode's metric as ``eval/<metric>``.
+    Returns those means and ``episodes``, the number of finished episodes."""
+    metrics: dict[str, list[torch.Tensor]] = defaultdict(list)
+    obs, _ = eval_envs.reset()
+    done = torch.ones(eval_envs.num_envs, device=eval_envs.device)
+    for _ in range(num_eval_steps):
+        with torch.no_grad():
+            obs, _, terminated, truncated, info = eval_envs.step(policy(obs, done))
+        done = torch.logical_or(terminated, truncated).float()
+        if "final_info" in info:
+            mask = info["_final_info"]
+            for k, v in info["final_info"]["episode"].items():
+                metrics[k].append(v[mask].float())
+    means = {k: torch.cat(v).mean().item() for k, v in metrics.items()}
+    episodes = len(torch.cat(metrics["success_once"])) if metrics else 0
+    print(f"eval @ {global_step}: {episodes} episodes, " + ", ".join(f"{k} {v:.3f}" for k, v in means.items()))
+    for k, v in means.items():
+        log.scalar(f"eval/{k}", v, global_step)
+    return means | {"episodes": episodes}
