@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from mikasa_robo_rl.ppo import PPOArgs, observation_mode, parse_args
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,8 +87,8 @@ def test_vector_env_names_unknown_ids():
         (["--include-rgb", "--include-joints", "--include-oracle"], "rgb_joints_oracle"),
     ],
 )
-def test_mode_resolution(ppo, flags, mode):
-    assert ppo.observation_mode(ppo.parse_args(ppo.Args, ["--env_id=X-v0", *flags])) == mode
+def test_mode_resolution(flags, mode):
+    assert observation_mode(parse_args(PPOArgs, ["--env_id=X-v0", *flags])) == mode
 
 
 @pytest.mark.parametrize(
@@ -99,14 +100,14 @@ def test_mode_resolution(ppo, flags, mode):
         (["--include-state", "--include-oracle"], NotImplementedError),
     ],
 )
-def test_mode_errors(ppo, flags, error):
+def test_mode_errors(flags, error):
     with pytest.raises(error):
-        ppo.observation_mode(ppo.parse_args(ppo.Args, flags))
+        observation_mode(parse_args(PPOArgs, flags))
 
 
 def test_underscore_and_dash_spellings_agree(ppo):
-    a = ppo.parse_args(ppo.Args, ["--env_id=RememberColor3-v0", "--total_timesteps=100", "--num_eval_steps", "5"])
-    b = ppo.parse_args(ppo.Args, ["--env-id", "RememberColor3-v0", "--total-timesteps", "100", "--num-eval-steps=5"])
+    a = parse_args(ppo.Args, ["--env_id=RememberColor3-v0", "--total_timesteps=100", "--num_eval_steps", "5"])
+    b = parse_args(ppo.Args, ["--env-id", "RememberColor3-v0", "--total-timesteps", "100", "--num-eval-steps=5"])
     assert a == b and a.total_timesteps == 100 and a.num_eval_steps == 5
 
 

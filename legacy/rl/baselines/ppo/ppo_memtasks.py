@@ -18,7 +18,6 @@ Needs ``pip install "mikasa-robo-rl[train]"`` (tyro, TensorBoard); ``--track`` a
 
 from __future__ import annotations
 
-import random
 import sys
 import time
 from dataclasses import dataclass
@@ -27,18 +26,14 @@ from pathlib import Path
 import numpy as np
 import torch
 from mikasa_robo_rl.agents import Agent, AgentStateOnly, flatten_state_obs
-from mikasa_robo_rl.manifest import get_rl_task
 from mikasa_robo_rl.ppo import (
     PPOArgs,
-    RunLog,
     clipped_ppo_loss,
     finite_horizon_advantages,
     gae_advantages,
     log_iteration,
-    make_envs,
-    observation_mode,
     parse_args,
-    run_directory,
+    start_run,
 )
 from mikasa_robo_rl.ppo import evaluate as ppo_evaluate
 from torch import nn, optim
@@ -51,32 +46,9 @@ class Args(PPOArgs):
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
     args = parse_args(Args, sys.argv[1:] if argv is None else argv)
-    mode = observation_mode(args)
-    horizon = get_rl_task(args.env_id).max_episode_steps  # unknown ids fail here, naming close ones
-    if args.evaluate and not args.checkpoint:
-        raise ValueError("--evaluate needs --checkpoint")
-    num_envs = 1 if args.evaluate else args.num_envs
-    args.batch_size = num_envs * args.num_steps
-    args.minibatch_size = args.batch_size // args.num_minibatches
-    args.num_iterations = args.total_timesteps // args.batch_size
-    if args.minibatch_size < 1:
-        raise ValueError(f"num_envs * num_steps = {args.batch_size} is smaller than num_minibatches = {args.num_minibatches}")
-    if args.capture_video:
-        print("note: --capture-video is not implemented for CPU envs yet; no videos are written")
-    run_name, save_dir = run_directory(args, mode, Path(__file__).stem)
-
-    # Seeding, device.
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
-
-    # Envs (CPU sub-envs in worker processes, batched) and logs.
-    envs, eval_envs = make_envs(args, mode, num_envs, device)
-    print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
-    run_log = RunLog(args, run_name, save_dir)
-    log = run_log.scalar
+    run = start_run(args, Path(__file__).stem)
+    mode, num_envs, device, envs, eval_envs = run.mode, run.num_envs, run.device, run.envs, run.eval_envs
+    log = run.log.scalar
 
     # Agent.
     next_obs, _ = envs.reset(seed=args.seed)
@@ -103,25 +75,22 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     def evaluate(global_step: int) -> dict[str, float]:
         agent.eval()
         result = ppo_evaluate(eval_envs, lambda obs, done: agent.get_action(agent_input(obs), deterministic=True),
-                              args.num_eval_steps, run_log, global_step)
+                              args.num_eval_steps, run.log, global_step)
         agent.train()
         return result
 
     if args.evaluate:
         result = evaluate(0)
-        envs.close(), eval_envs.close(), run_log.close()
+        run.close()
         return result
 
-    global_step, start_time, saves, last_eval = 0, time.time(), 0, {}
+    global_step, start_time, last_eval = 0, time.time(), {}
     next_done = torch.zeros(num_envs, device=device)
     for iteration in range(1, args.num_iterations + 1):
         final_values = torch.zeros((args.num_steps, num_envs), device=device)
         if iteration % args.eval_freq == 1:
             last_eval = evaluate(global_step)
-            if args.save_model:
-                save_dir.mkdir(parents=True, exist_ok=True)
-                torch.save(agent.state_dict(), save_dir / f"ckpt_{saves}_{iteration}.pt")
-                saves += 1
+            run.save(agent, iteration=iteration)
         if args.anneal_lr:
             optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (iteration - 1.0) / args.num_iterations)
 
@@ -187,17 +156,15 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         update_time = time.time() - update_start
 
         sps = int(global_step / (time.time() - start_time))
-        log_iteration(run_log, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values, b_returns,
+        log_iteration(run.log, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values, b_returns,
                       sps, rollout_time, update_time, num_envs * args.num_steps)
         print(f"iteration {iteration}/{args.num_iterations}: step {global_step}, SPS {sps}, "
               f"rollout {rollout_time:.1f} s, update {update_time:.1f} s", flush=True)
 
     last_eval = evaluate(global_step)
-    if args.save_model:
-        save_dir.mkdir(parents=True, exist_ok=True)
-        torch.save(agent.state_dict(), save_dir / "final_ckpt.pt")
-        print(f"checkpoints in {save_dir}")
-    envs.close(), eval_envs.close(), run_log.close()
+    run.save(agent, "final_ckpt.pt")
+    print(f"logs and checkpoints in {run.save_dir}")
+    run.close()
     return last_eval
 
 

@@ -7,6 +7,7 @@ algorithm; this module keeps what they share. Needs the ``train`` extra (tyro, T
 from __future__ import annotations
 
 import os
+import random
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -18,11 +19,12 @@ import numpy as np
 import torch
 import tyro
 
+from mikasa_robo_rl.manifest import get_rl_task
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
 __all__ = [
-    "PPOArgs", "RunLog", "clipped_ppo_loss", "evaluate", "finite_horizon_advantages", "log_iteration", "gae_advantages", "make_envs", "observation_mode",
-    "parse_args", "run_directory",
+    "PPOArgs", "Run", "RunLog", "clipped_ppo_loss", "evaluate", "finite_horizon_advantages", "log_iteration", "gae_advantages", "make_envs", "observation_mode",
+    "parse_args", "run_directory", "start_run",
 ]
 
 T = TypeVar("T")
@@ -314,3 +316,68 @@ def evaluate(
     for k, v in means.items():
         log.scalar(f"eval/{k}", v, global_step)
     return means | {"episodes": episodes}
+
+
+@dataclass
+class Run:
+    """What a trainer works with once set up by :func:`start_run`."""
+
+    args: PPOArgs
+    mode: str
+    num_envs: int
+    device: torch.device
+    envs: CpuVectorEnv
+    eval_envs: CpuVectorEnv
+    log: RunLog
+    save_dir: Path
+    saves: int = 0
+
+    def save(self, agent: torch.nn.Module, name: str | None = None, iteration: int | None = None) -> None:
+        """Checkpoint ``agent`` (with ``--save-model``): ``name``, or the next periodic
+        ``ckpt_<k>_<iteration>.pt``."""
+        if not self.args.save_model:
+            return
+        self.save_dir.mkdir(parents=True, exist_ok=True)
+        if name is None:
+            name = f"ckpt_{self.saves}_{iteration}.pt"
+            self.saves += 1
+        torch.save(agent.state_dict(), self.save_dir / name)
+
+    def close(self) -> None:
+        """Stop the env workers and close the logs."""
+        self.envs.close()
+        self.eval_envs.close()
+        self.log.close()
+
+
+def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -> Run:
+    """Validate the flags and set a run up (§2-§3, §7): the derived sizes, seeding
+    (python, numpy, torch), the device, the training and eval envs and the logs.
+    ``whole_env_minibatches``: minibatches are whole envs (the LSTM), so ``num_envs`` must be
+    a multiple of ``num_minibatches``."""
+    mode = observation_mode(args)
+    horizon = get_rl_task(args.env_id).max_episode_steps  # unknown ids fail here, naming close ones
+    if args.evaluate and not args.checkpoint:
+        raise ValueError("--evaluate needs --checkpoint")
+    num_envs = 1 if args.evaluate else args.num_envs
+    args.batch_size = num_envs * args.num_steps
+    args.minibatch_size = args.batch_size // args.num_minibatches
+    args.num_iterations = args.total_timesteps // args.batch_size
+    if whole_env_minibatches and num_envs % args.num_minibatches:
+        raise ValueError(f"num_envs = {num_envs} must be a multiple of num_minibatches = {args.num_minibatches} "
+                         "(a minibatch is whole envs' sequences)")
+    if args.minibatch_size < 1:
+        raise ValueError(f"num_envs * num_steps = {args.batch_size} is smaller than num_minibatches = {args.num_minibatches}")
+    if args.capture_video:
+        print("note: --capture-video is not implemented for CPU envs yet; no videos are written")
+    run_name, save_dir = run_directory(args, mode, script)
+
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
+
+    envs, eval_envs = make_envs(args, mode, num_envs, device)
+    print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
+    return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir)
