@@ -1,0 +1,66 @@
+"""Learning curves of PPO runs from their TensorBoard logs: a PNG and the points as JSON.
+
+    python legacy/rl/baselines/plot_curves.py RUN_DIR_OR_EVENT_FILE [...] --labels "PPO-MLP state" \\
+        --out legacy/rl/baselines/curves/RememberColor3-v0_state
+
+Plots ``eval/success_once`` and ``eval/return`` against env steps, one line per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+TAGS = ("eval/success_once", "eval/return")
+
+
+def read_curves(path: Path) -> dict[str, list[tuple[int, float]]]:
+    """{tag: [(env step, value), ...]} of TAGS from an event file (or the newest one in a directory)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    files = [path] if path.is_file() else sorted(path.rglob("events.out.tfevents.*"))
+    if not files:
+        raise ValueError(f"no TensorBoard event file at {path}")
+    events = EventAccumulator(str(files[-1]))
+    events.Reload()
+    present = events.Tags()["scalars"]
+    return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in TAGS if tag in present}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("runs", nargs="+", type=Path, help="run directories or event files")
+    parser.add_argument("--labels", nargs="*", default=None, help="one label per run (default: the paths)")
+    parser.add_argument("--out", required=True, help="output path without extension (.png and .json are written)")
+    args = parser.parse_args()
+    labels = args.labels or [str(r) for r in args.runs]
+    if len(labels) != len(args.runs):
+        parser.error(f"{len(args.runs)} runs but {len(labels)} labels")
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves = {label: read_curves(run) for label, run in zip(labels, args.runs, strict=True)}
+    fig, axes = plt.subplots(1, len(TAGS), figsize=(5 * len(TAGS), 3.5))
+    for ax, tag in zip(axes, TAGS, strict=True):
+        for label, runs in curves.items():
+            if tag in runs:
+                steps, values = zip(*runs[tag], strict=True)
+                ax.plot(steps, values, label=label)
+        ax.set_xlabel("env steps")
+        ax.set_title(tag)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylim(-0.02, 1.02)
+    axes[0].legend()
+    fig.tight_layout()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out.with_suffix(".png"), dpi=100)
+    out.with_suffix(".json").write_text(json.dumps(curves, indent=1))
+
+
+if __name__ == "__main__":
+    main()
