@@ -52,14 +52,16 @@ def test_vector_env_batches_sub_envs_and_matches_across_worker_counts():
     spec = SubEnvSpec(ENV_ID)
     with CpuVectorEnv(spec, 3, workers=0) as inline:
         assert inline.max_episode_steps == 60 and inline.single_action_space.shape == (8,)
-        first_inline, finals_inline = _rollout(inline, 60)
+        first_inline, finals_inline = _rollout(inline, 180)
     with CpuVectorEnv(spec, 3, workers=2) as pooled:
-        first_pooled, finals_pooled = _rollout(pooled, 60)
+        first_pooled, finals_pooled = _rollout(pooled, 180)
     assert first_inline["state"].shape == (3, 35) and first_inline["state"].dtype == torch.float32
     assert torch.equal(first_inline["state"], first_pooled["state"])
-    assert len(finals_inline) == len(finals_pooled) == 1
-    for key in ("success_once", "return", "episode_len"):
-        assert torch.equal(finals_inline[0][key], finals_pooled[0][key])
+    # Three episodes each, the auto-reset ones too, identical however the sub-envs are spread.
+    assert len(finals_inline) == len(finals_pooled) == 3
+    for inline_final, pooled_final in zip(finals_inline, finals_pooled, strict=True):
+        for key in ("success_once", "return", "episode_len"):
+            assert torch.equal(inline_final[key], pooled_final[key])
     assert finals_inline[0]["episode_len"].tolist() == [60, 60, 60]
 
 

@@ -6,10 +6,11 @@ processes (``mikasa_envs.workers``, the process loop the bench and the collector
 presents them as one batch: ``reset`` / ``step`` take and return batched torch tensors.
 
 Each sub-env is ``gym.make(<id>, num_envs=1, sim_backend="cpu")`` with the RL wrapper chain,
-wrapped in ManiSkill's own ``ManiSkillVectorEnv`` (auto-reset, ``ignore_terminations``,
-``record_metrics``), so episode bookkeeping (``final_observation``, ``final_info`` with
-``episode`` = ``success_once`` / ``return`` / ``episode_len`` / ...) is ManiSkill's; this
-module only ships the pieces between processes and stacks them. A worker process holds
+wrapped in ManiSkill's own ``ManiSkillVectorEnv`` (``ignore_terminations``,
+``record_metrics``: ``episode`` = ``success_once`` / ``return`` / ``episode_len`` / ...);
+this module resets finished sub-envs with seeds of their own (``final_observation``,
+``final_info``, ``_final_info`` as ManiSkillVectorEnv's auto-reset reports them), ships the
+pieces between processes and stacks them. A worker process holds
 ``num_envs / workers`` sub-envs and steps them one after another.
 """
 
@@ -30,8 +31,6 @@ from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
 __all__ = ["CpuVectorEnv", "SubEnvSpec", "default_vector_workers"]
 
-# Keys of a ManiSkillVectorEnv step's info that the trainers read.
-_FINAL_KEYS = ("final_observation", "final_info", "_final_info")
 
 
 def default_vector_workers(num_envs: int) -> int:
@@ -78,7 +77,9 @@ class SubEnvSpec:
         )
         try:
             env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
-            return ManiSkillVectorEnv(env, 1, ignore_terminations=self.ignore_terminations, record_metrics=True)
+            return ManiSkillVectorEnv(
+                env, 1, auto_reset=False, ignore_terminations=self.ignore_terminations, record_metrics=True
+            )
         except BaseException:
             env.close()
             raise
@@ -96,23 +97,39 @@ def _to_numpy(tree: Any) -> Any:
 
 
 class _SubEnvs:
-    """A worker's state: its sub-envs; jobs ``("reset", seeds)`` and ``("step", actions)``."""
+    """A worker's state: its sub-envs; jobs ``("reset", seeds)`` and ``("step", actions)``.
+
+    A finished sub-env resets itself, as ManiSkillVectorEnv's auto-reset does, but with a
+    seed drawn from its own generator (seeded by its last seeded reset): an unseeded reset
+    takes its scene from the process's global torch RNG, so the episodes after the first
+    would depend on how the sub-envs are spread over processes.
+    """
 
     def __init__(self, spec: SubEnvSpec, count: int) -> None:
         self.envs = [spec.make() for _ in range(count)]
+        self.seeders = [np.random.RandomState() for _ in range(count)]
+
+    def _reset(self, i: int, seed: int | None) -> tuple[Any, Any]:
+        if seed is None:
+            seed = int(self.seeders[i].randint(2**31))
+        else:
+            self.seeders[i] = np.random.RandomState(seed)
+        return self.envs[i].reset(seed=seed)
 
     def run(self, job: tuple[str, Any]) -> list[Any]:
         kind, payload = job
         if kind == "reset":
-            return [_to_numpy(env.reset(seed=seed)) for env, seed in zip(self.envs, payload, strict=True)]
+            return [_to_numpy(self._reset(i, seed)) for i, seed in enumerate(payload)]
         if kind == "step":
             out = []
-            for env, action in zip(self.envs, payload, strict=True):
+            for i, (env, action) in enumerate(zip(self.envs, payload, strict=True)):
                 obs, reward, terminated, truncated, info = env.step(torch.as_tensor(action[None]))
                 # Only what the trainers read crosses back: final observation and metrics.
-                kept = {k: info[k] for k in _FINAL_KEYS if k in info}
-                if "final_info" in kept:
-                    kept["final_info"] = {"episode": kept["final_info"]["episode"]}
+                kept = {}
+                if bool((terminated | truncated).any()):
+                    kept = {"final_observation": obs, "final_info": {"episode": info["episode"]},
+                            "_final_info": terminated | truncated}
+                    obs, _ = self._reset(i, None)
                 out.append(_to_numpy((obs, reward, terminated, truncated, kept)))
             return out
         raise ValueError(f"unknown job {kind!r}")
