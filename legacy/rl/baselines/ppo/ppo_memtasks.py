@@ -31,7 +31,6 @@ from mikasa_robo_rl.ppo import (
     clipped_ppo_loss,
     finite_horizon_advantages,
     gae_advantages,
-    log_iteration,
     parse_args,
     start_run,
 )
@@ -84,12 +83,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         run.close()
         return result
 
-    global_step, start_time, last_eval = 0, time.time(), {}
+    global_step = 0
     next_done = torch.zeros(num_envs, device=device)
     for iteration in range(1, args.num_iterations + 1):
         final_values = torch.zeros((args.num_steps, num_envs), device=device)
         if iteration % args.eval_freq == 1:
-            last_eval = evaluate(global_step)
+            evaluate(global_step)
             run.save(agent, iteration=iteration)
         if args.anneal_lr:
             optimizer.param_groups[0]["lr"] = args.learning_rate * (1.0 - (iteration - 1.0) / args.num_iterations)
@@ -155,17 +154,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 break
         update_time = time.time() - update_start
 
-        sps = int(global_step / (time.time() - start_time))
-        log_iteration(run.log, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values, b_returns,
-                      sps, rollout_time, update_time, num_envs * args.num_steps)
-        print(f"iteration {iteration}/{args.num_iterations}: step {global_step}, SPS {sps}, "
-              f"rollout {rollout_time:.1f} s, update {update_time:.1f} s", flush=True)
+        run.end_iteration(iteration, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values,
+                          b_returns, rollout_time, update_time)
 
-    last_eval = evaluate(global_step)
-    run.save(agent, "final_ckpt.pt")
-    print(f"logs and checkpoints in {run.save_dir}")
-    run.close()
-    return last_eval
+    return run.finish(agent, evaluate(global_step))
 
 
 if __name__ == "__main__":

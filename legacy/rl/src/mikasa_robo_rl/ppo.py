@@ -11,7 +11,7 @@ import random
 import time
 from collections import defaultdict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -331,6 +331,7 @@ class Run:
     log: RunLog
     save_dir: Path
     saves: int = 0
+    start_time: float = field(default_factory=time.time)
 
     def save(self, agent: torch.nn.Module, name: str | None = None, iteration: int | None = None) -> None:
         """Checkpoint ``agent`` (with ``--save-model``): ``name``, or the next periodic
@@ -342,6 +343,24 @@ class Run:
             name = f"ckpt_{self.saves}_{iteration}.pt"
             self.saves += 1
         torch.save(agent.state_dict(), self.save_dir / name)
+
+    def end_iteration(
+        self, iteration: int, global_step: int, lr: float, stats: dict[str, torch.Tensor], clipfracs: list[float],
+        values: torch.Tensor, returns: torch.Tensor, rollout_time: float, update_time: float,
+    ) -> None:
+        """Log an iteration's scalars (§5.3) and print its progress line."""
+        sps = int(global_step / (time.time() - self.start_time))
+        log_iteration(self.log, global_step, lr, stats, clipfracs, values, returns, sps, rollout_time, update_time,
+                      self.num_envs * self.args.num_steps)
+        print(f"iteration {iteration}/{self.args.num_iterations}: step {global_step}, SPS {sps}, "
+              f"rollout {rollout_time:.1f} s, update {update_time:.1f} s", flush=True)
+
+    def finish(self, agent: torch.nn.Module, final_eval: dict[str, float]) -> dict[str, float]:
+        """Save ``final_ckpt.pt``, close everything; returns ``final_eval``."""
+        self.save(agent, "final_ckpt.pt")
+        print(f"logs and checkpoints in {self.save_dir}")
+        self.close()
+        return final_eval
 
     def close(self) -> None:
         """Stop the env workers and close the logs."""
