@@ -19,7 +19,7 @@ import pytest
 import torch
 from mikasa_datasets.npz import RL_EPISODE_KEYS
 from mikasa_datasets.validate import validate_path
-from mikasa_robo_rl.agents import CKPT_NAME, CKPT_SUBDIR, AgentStateOnly
+from mikasa_robo_rl.agents import CKPT_NAME, CKPT_SUBDIR, AgentStateOnly, find_checkpoints
 from mikasa_robo_rl.collect import (
     CollectError,
     collect,
@@ -253,3 +253,13 @@ def test_shell_game_episode_does_not_depend_on_the_episodes_before(tmp_path):
     first.unlink()
     collect(env_id, tmp_path / "a", 2, batch_size=2, workers=1, progress=False)
     assert first.read_bytes() == reference
+
+
+def test_shipped_and_trained_checkpoint_layouts_are_found(tmp_path):
+    shipped = Path(__file__).resolve().parents[1] / "legacy/rl/baselines/checkpoints"
+    assert find_checkpoints(shipped, "RememberColor3-v0") == [shipped / "RememberColor3-v0/final_ckpt.pt"]
+    run = tmp_path / "checkpoints/ppo_memtasks/state/normalized_dense" / ENV_ID / "run/20261125_000000"
+    run.mkdir(parents=True)
+    (run / "final_ckpt.pt").touch()
+    (run / "ckpt_0_1.pt").touch()
+    assert find_checkpoints(tmp_path, ENV_ID) == [run / "final_ckpt.pt"]

@@ -40,6 +40,8 @@ HIDDEN = 256
 CKPT_SUBDIR = "oracle_checkpoints/ppo_memtasks/state/normalized_dense"
 """Where the release kept its PPO state agents, under a checkpoint root, per env id."""
 CKPT_NAME = "final_success_ckpt.pt"
+TRAINED_CKPT_NAME = "final_ckpt.pt"
+"""What ``baselines/ppo/ppo_memtasks.py`` writes at the end of a run (and what ships)."""
 
 
 def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:
@@ -283,13 +285,24 @@ def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:
 
 
 def find_checkpoints(ckpt_dir: str | os.PathLike[str], env_id: str) -> list[Path]:
-    """Every ``final_success_ckpt.pt`` under ``<ckpt_dir>/<CKPT_SUBDIR>/<env_id>`` (any
-    depth), sorted by path; ``ValueError`` if there is none."""
-    root = Path(ckpt_dir) / CKPT_SUBDIR / env_id
-    found = sorted(root.rglob(CKPT_NAME)) if root.is_dir() else []
-    if not found:
-        raise ValueError(f"no checkpoint {root}/**/{CKPT_NAME}")
-    return found
+    """The state checkpoints of ``env_id`` under ``ckpt_dir``, sorted by path, from the first
+    layout that has any: the release's ``<ckpt_dir>/<CKPT_SUBDIR>/<env_id>/**/
+    final_success_ckpt.pt``; this package's shipped ``<ckpt_dir>/<env_id>/final_ckpt.pt``
+    (``legacy/rl/baselines/checkpoints``); a ``ppo_memtasks.py`` run's
+    ``<ckpt_dir>/checkpoints/ppo_memtasks/state/<reward_mode>/<env_id>/**/final_ckpt.pt``.
+    ``ValueError`` if there is none."""
+    root = Path(ckpt_dir)
+    layouts = [
+        (root / CKPT_SUBDIR / env_id, f"**/{CKPT_NAME}"),
+        (root / env_id, TRAINED_CKPT_NAME),
+        (root / "checkpoints/ppo_memtasks/state", f"*/{env_id}/**/{TRAINED_CKPT_NAME}"),
+    ]
+    for directory, pattern in layouts:
+        found = sorted(directory.glob(pattern)) if directory.is_dir() else []
+        if found:
+            return found
+    raise ValueError(f"no checkpoint {root / CKPT_SUBDIR / env_id}/**/{CKPT_NAME} (nor {root / env_id}/"
+                     f"{TRAINED_CKPT_NAME}, nor a ppo_memtasks.py run's state {TRAINED_CKPT_NAME})")
 
 
 def load_agent(path: str | os.PathLike[str]) -> AgentStateOnly:
