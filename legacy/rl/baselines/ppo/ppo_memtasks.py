@@ -29,8 +29,7 @@ from mikasa_robo_rl.agents import Agent, AgentStateOnly, flatten_state_obs
 from mikasa_robo_rl.ppo import (
     PPOArgs,
     clipped_ppo_loss,
-    finite_horizon_advantages,
-    gae_advantages,
+    estimate_advantages,
     parse_args,
     start_run,
 )
@@ -121,9 +120,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         # Advantages and returns.
         with torch.no_grad():
             next_value = agent.get_value(agent_input(next_obs)).reshape(1, -1)[0]
-            estimate = finite_horizon_advantages if args.finite_horizon_gae else gae_advantages
-            advantages = estimate(rewards, values, dones, final_values, next_value, next_done,
-                                  args.gamma, args.gae_lambda)
+            advantages = estimate_advantages(rewards, values, dones, final_values, next_value, next_done,
+                                             args.gamma, args.gae_lambda, args.finite_horizon_gae)
             returns = advantages + values
 
         # PPO update over shuffled minibatches of the flattened batch.

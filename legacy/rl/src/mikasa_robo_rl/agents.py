@@ -63,7 +63,32 @@ def _mlp(in_dim: int, out_dim: int, out_std: float) -> nn.Sequential:
     )
 
 
-class AgentStateOnly(nn.Module):
+class _GaussianHeads(nn.Module):
+    """What the three agents share: a diagonal Gaussian policy with the state-independent
+    ``actor_logstd`` over ``actor_mean(features)``, and ``critic(features)``; log-prob and
+    entropy summed over action dimensions (``ppo_baselines.md`` §4)."""
+
+    actor_mean: nn.Module
+    critic: nn.Module
+    actor_logstd: nn.Parameter
+
+    def _distribution(self, mean: torch.Tensor) -> Normal:
+        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
+
+    def _act(self, features: torch.Tensor, deterministic: bool) -> torch.Tensor:
+        mean = self.actor_mean(features)
+        return mean if deterministic else self._distribution(mean).sample()
+
+    def _act_and_score(
+        self, features: torch.Tensor, action: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        probs = self._distribution(self.actor_mean(features))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(features)
+
+
+class AgentStateOnly(_GaussianHeads):
     """PPO actor-critic MLP on the flattened state observation.
 
     Critic and actor mean are ``Linear(obs_dim, 256)-Tanh-Linear(256, 256)-Tanh-
@@ -84,22 +109,13 @@ class AgentStateOnly(nn.Module):
 
     def get_action(self, x: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
         """The action for ``x``: the mean if ``deterministic``, else a Gaussian sample."""
-        action_mean = self.actor_mean(x)
-        if deterministic:
-            return action_mean
-        std = torch.exp(self.actor_logstd.expand_as(action_mean))
-        return Normal(action_mean, std).sample()
+        return self._act(x, deterministic)
 
     def get_action_and_value(
         self, x: torch.Tensor, action: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
-        action_mean = self.actor_mean(x)
-        std = torch.exp(self.actor_logstd.expand_as(action_mean))
-        probs = Normal(action_mean, std)
-        if action is None:
-            action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
+        return self._act_and_score(x, action)
 
     @classmethod
     def from_state_dict(cls, state_dict: Mapping[str, Any]) -> AgentStateOnly:
@@ -161,7 +177,7 @@ class NatureCNN(nn.Module):
         return torch.cat(parts, dim=1)
 
 
-class Agent(nn.Module):
+class Agent(_GaussianHeads):
     """PPO actor-critic for image observations: ``NatureCNN`` features, then critic
     ``Linear(F, 512)-ReLU-Linear(512, 1)`` and actor mean ``Linear(F, 512)-ReLU-
     Linear(512, action_dim)``; diagonal Gaussian with ``actor_logstd`` as ``AgentStateOnly``."""
@@ -182,27 +198,19 @@ class Agent(nn.Module):
 
     def get_action(self, obs: Mapping[str, torch.Tensor], deterministic: bool = False) -> torch.Tensor:
         """The mean action if ``deterministic``, else a Gaussian sample."""
-        mean = self.actor_mean(self.feature_net(obs))
-        if deterministic:
-            return mean
-        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample()
+        return self._act(self.feature_net(obs), deterministic)
 
     def get_action_and_value(
         self, obs: Mapping[str, torch.Tensor], action: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
-        features = self.feature_net(obs)
-        mean = self.actor_mean(features)
-        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
-        if action is None:
-            action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(features)
+        return self._act_and_score(self.feature_net(obs), action)
 
 
 LSTMState = tuple[torch.Tensor, torch.Tensor]
 
 
-class AgentLSTM(nn.Module):
+class AgentLSTM(_GaussianHeads):
     """PPO-LSTM actor-critic (``ppo_baselines.md`` §4.3): ``NatureCNN`` features (proprio
     width 256), an LSTM (orthogonal weights, zero biases), then critic and actor-mean heads
     ``Linear(H, 512)-ReLU-Linear(512, out)`` on its output; ``actor_logstd`` as the others.
@@ -260,21 +268,14 @@ class AgentLSTM(nn.Module):
     ) -> tuple[torch.Tensor, LSTMState]:
         """(action, new state): the mean if ``deterministic``, else a Gaussian sample."""
         hidden, state = self.get_states(obs, state, done)
-        mean = self.actor_mean(hidden)
-        if deterministic:
-            return mean, state
-        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean))).sample(), state
+        return self._act(hidden, deterministic), state
 
     def get_action_and_value(
         self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor, action: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, LSTMState]:
         """``(action, log_prob, entropy, value, new state)`` as PPO's update needs them."""
         hidden, state = self.get_states(obs, state, done)
-        mean = self.actor_mean(hidden)
-        probs = Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
-        if action is None:
-            action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(hidden), state
+        return *self._act_and_score(hidden, action), state
 
 
 def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:

@@ -23,8 +23,8 @@ from mikasa_robo_rl.manifest import get_rl_task
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
 __all__ = [
-    "PPOArgs", "Run", "RunLog", "clipped_ppo_loss", "evaluate", "finite_horizon_advantages", "log_iteration", "gae_advantages", "make_envs", "observation_mode",
-    "parse_args", "run_directory", "start_run",
+    "PPOArgs", "Run", "RunLog", "clipped_ppo_loss", "estimate_advantages", "evaluate", "log_iteration",
+    "make_envs", "observation_mode", "parse_args", "run_directory", "start_run",
 ]
 
 T = TypeVar("T")
@@ -134,34 +134,30 @@ def parse_args(args_class: type[T], argv: list[str]) -> T:
     return tyro.cli(args_class, args=dashed)
 
 
-def finite_horizon_advantages(rewards, values, dones, final_values, next_value, next_done, gamma, lam):
-    """``ppo_baselines.md`` §5.2, finite-horizon variant: per step, the λ-weighted average of
-    the n-step returns still inside the episode, normalised by the weights available."""
+def estimate_advantages(
+    rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, final_values: torch.Tensor,
+    next_value: torch.Tensor, next_done: torch.Tensor, gamma: float, lam: float, finite_horizon: bool = True,
+) -> torch.Tensor:
+    """Advantages of a rollout (§5.2), ``(num_steps, num_envs)``; ``final_values`` holds
+    V(final observation) where an episode ended. ``finite_horizon``: per step, the
+    λ-weighted average of the n-step returns still inside the episode, normalised by the
+    weights available; else standard GAE (``--no-finite-horizon-gae``)."""
     num_steps = rewards.shape[0]
     advantages = torch.zeros_like(rewards)
-    lam_sum = rew_sum = val_sum = torch.zeros_like(next_value)
+    last = lam_sum = rew_sum = val_sum = torch.zeros_like(next_value)
     for t in reversed(range(num_steps)):
         not_done = 1.0 - (next_done if t == num_steps - 1 else dones[t + 1])
         following = next_value if t == num_steps - 1 else values[t + 1]
         real_next_value = not_done * following + final_values[t]
-        lam_sum, rew_sum, val_sum = lam_sum * not_done, rew_sum * not_done, val_sum * not_done
-        lam_sum = 1 + lam * lam_sum
-        rew_sum = lam * gamma * rew_sum + lam_sum * rewards[t]
-        val_sum = lam * gamma * val_sum + gamma * real_next_value
-        advantages[t] = (rew_sum + val_sum) / lam_sum - values[t]
-    return advantages
-
-
-def gae_advantages(rewards, values, dones, final_values, next_value, next_done, gamma, lam):
-    """Standard GAE (``--no-finite-horizon-gae``)."""
-    num_steps = rewards.shape[0]
-    advantages = torch.zeros_like(rewards)
-    last = torch.zeros_like(next_value)
-    for t in reversed(range(num_steps)):
-        not_done = 1.0 - (next_done if t == num_steps - 1 else dones[t + 1])
-        following = next_value if t == num_steps - 1 else values[t + 1]
-        delta = rewards[t] + gamma * (not_done * following + final_values[t]) - values[t]
-        advantages[t] = last = delta + gamma * lam * not_done * last
+        if finite_horizon:
+            lam_sum, rew_sum, val_sum = lam_sum * not_done, rew_sum * not_done, val_sum * not_done
+            lam_sum = 1 + lam * lam_sum
+            rew_sum = lam * gamma * rew_sum + lam_sum * rewards[t]
+            val_sum = lam * gamma * val_sum + gamma * real_next_value
+            advantages[t] = (rew_sum + val_sum) / lam_sum - values[t]
+        else:
+            delta = rewards[t] + gamma * real_next_value - values[t]
+            advantages[t] = last = delta + gamma * lam * not_done * last
     return advantages
 
 

@@ -32,7 +32,6 @@ from mani_skill.utils.gym_utils import find_max_episode_steps_value
 __all__ = ["CpuVectorEnv", "SubEnvSpec", "default_vector_workers"]
 
 
-
 def default_vector_workers(num_envs: int) -> int:
     """One worker process per CPU core, at most one per sub-env."""
     return max(1, min(num_envs, os.cpu_count() or 1))
@@ -57,13 +56,9 @@ class SubEnvSpec:
         """One sub-env: ``gym.make`` on the CPU sim, the RL chain, ``ManiSkillVectorEnv``."""
         from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-        from mikasa_robo_rl.manifest import get_rl_task, unknown_rl_env_message
-        from mikasa_robo_rl.wrappers import apply_rl_wrappers, env_obs_mode
+        from mikasa_robo_rl.wrappers import apply_rl_wrappers, env_info, env_obs_mode
 
-        try:
-            get_rl_task(self.env_id)
-        except ValueError:
-            raise ValueError(unknown_rl_env_message(self.env_id)) from None
+        env_info(self.env_id, self.noop_steps)  # an unknown id fails here, naming close ones
         env = gym.make(
             self.env_id,
             num_envs=1,
@@ -140,13 +135,9 @@ class _SubEnvs:
 
 
 def _start_sub_envs(spec: SubEnvSpec, count: int) -> _SubEnvs:
-    # The workers already use the cores: one thread each (torch, Mesa's rasteriser).
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("LP_NUM_THREADS", "1")
-    import logging
+    from mikasa_envs.workers import quiet_worker
 
-    logging.getLogger("mani_skill").setLevel(logging.ERROR)
-    torch.set_num_threads(1)
+    quiet_worker()
     import mikasa_robo_rl  # noqa: F401  (registers the RL ids in the spawned interpreter)
 
     return _SubEnvs(spec, count)
@@ -271,14 +262,17 @@ class CpuVectorEnv:
         info: dict[str, Any] = {}
         finished = [("_final_info" in r[4]) and bool(np.asarray(r[4]["_final_info"]).any()) for r in results]
         if any(finished):
-            # Sub-envs that did not finish contribute their current observation and metrics
-            # (masked out by ``_final_info``), as ManiSkillVectorEnv's batch does.
+            # Sub-envs that did not finish contribute their current observation (masked out
+            # by ``_final_info``), as ManiSkillVectorEnv's batch does.
             info["final_observation"] = _stack(
                 [r[4]["final_observation"] if f else r[0] for r, f in zip(results, finished, strict=True)], self.device
             )
+            # Metrics exist only for finished sub-envs; the others get zeros (masked out).
+            template = next(r[4]["final_info"]["episode"] for r, f in zip(results, finished, strict=True) if f)
+            blank = {k: np.zeros_like(v) for k, v in template.items()}
             info["final_info"] = {
                 "episode": _stack(
-                    [r[4]["final_info"]["episode"] if f else r[4]["episode"] for r, f in zip(results, finished, strict=True)],
+                    [r[4]["final_info"]["episode"] if f else blank for r, f in zip(results, finished, strict=True)],
                     self.device,
                 )
             }

@@ -25,7 +25,6 @@ workers on other machines.
 
 from __future__ import annotations
 
-import logging
 import multiprocessing as mp
 import os
 import queue
@@ -311,24 +310,11 @@ class InlineExecutor(Executor):
             worker.close()
 
 
-def _quiet_worker() -> None:
-    """Limit a worker to one thread (the pool already uses every core), import the envs
-    and hush ManiSkill's per-process 'no CUDA render device' warning (every worker of a
-    CPU machine would print it; a worker told to render on the GPU checks for itself)."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import torch
-
-    torch.set_num_threads(1)
-    import mikasa_envs  # noqa: F401  (registers the envs once per process)
-
-    # ManiSkill's logger is named "mani_skill " (trailing space) and sets its level when
-    # imported, so this has to come after the import.
-    for name in ("mani_skill ", "mani_skill"):
-        logging.getLogger(name).setLevel(logging.ERROR)
-
-
 def _start_worker(process_index: int, threaded: bool, worker_id: int) -> _EpisodeWorker:
-    _quiet_worker()
+    from mikasa_envs.workers import quiet_worker
+
+    # Rendering workers keep Mesa's threads: the bench's render path was measured with them.
+    quiet_worker(one_raster_thread=False)
     return _EpisodeWorker(worker_id, process_index, threaded)
 
 

@@ -33,7 +33,6 @@ from .executor import (
     EpisodeOutcome,
     Executor,
     _EpisodeWorker,
-    _quiet_worker,
     _Scheduler,
     render_config,
 )
@@ -63,7 +62,9 @@ class _RayWorker:
     def __init__(self, worker_id: int, env_vars: Mapping[str, str]) -> None:
         # Before anything can initialise Vulkan: the render device's driver restriction.
         apply_environment(env_vars)
-        _quiet_worker()
+        from mikasa_envs.workers import quiet_worker
+
+        quiet_worker(one_raster_thread=False)
         self.worker = _EpisodeWorker(worker_id)
 
     def ready(self) -> str:

@@ -11,7 +11,9 @@ state (`serve_job_slots`): their envs then share GPU render passes (`render_batc
 
 from __future__ import annotations
 
+import logging
 import multiprocessing as mp
+import os
 import queue
 import signal
 import threading
@@ -20,7 +22,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-__all__ = ["JobRunner", "serve_job_slots", "serve_jobs", "stop_processes"]
+__all__ = ["JobRunner", "quiet_worker", "serve_job_slots", "serve_jobs", "stop_processes"]
 
 
 class JobRunner(Protocol):
@@ -29,6 +31,26 @@ class JobRunner(Protocol):
     def run(self, job: Any) -> Any: ...
 
     def close(self) -> None: ...
+
+
+def quiet_worker(*, one_raster_thread: bool = True) -> None:
+    """Prepare a pool's worker process: one thread for torch (and, with
+    ``one_raster_thread``, for Mesa's CPU Vulkan rasteriser, whose frames do not depend on
+    it), since the pool already uses every core; register the envs; hush ManiSkill's
+    per-process 'no CUDA render device' warning (every worker of a CPU machine would print
+    it; a worker told to render on the GPU checks for itself). Call it first in the worker."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if one_raster_thread:
+        os.environ.setdefault("LP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+    import mikasa_envs  # noqa: F401  (registers the envs once per process)
+
+    # ManiSkill's logger is named "mani_skill " (trailing space) and sets its level when
+    # imported, so this has to come after the import.
+    for name in ("mani_skill ", "mani_skill"):
+        logging.getLogger(name).setLevel(logging.ERROR)
 
 
 def serve_jobs(worker_id: int, inbox: Any, outbox: Any, start: Callable[[], JobRunner]) -> None:

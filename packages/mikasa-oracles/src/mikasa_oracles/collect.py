@@ -326,14 +326,9 @@ class InlinePool:
 
 
 def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None) -> Any:
-    # W workers already use the cores: one thread each, for torch and for Mesa's CPU
-    # Vulkan rasteriser (its frames do not depend on the thread count).
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("LP_NUM_THREADS", "1")
-    logging.getLogger("mani_skill").setLevel(logging.ERROR)
-    import torch
+    from mikasa_envs.workers import quiet_worker  # imported lazily: mikasa_envs loads ManiSkill
 
-    torch.set_num_threads(1)
+    quiet_worker()
     return (factory or _AttemptRunner)(*runner_args)
 
 
