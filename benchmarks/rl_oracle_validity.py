@@ -40,25 +40,17 @@ def run_job(
     ``horizon_factor`` x the horizon as the step limit)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import gymnasium as gym
-    import numpy as np
     import torch
-    from mikasa_oracles import rollout
+    from mikasa_oracles import ZeroActions, rollout
     from mikasa_robo_rl import get_rl_task
     from mikasa_robo_rl.oracles import make_rl_oracle
 
     torch.set_num_threads(1)
 
-    class ZeroPolicy:
-        def reset(self) -> None:
-            pass
-
-        def forward(self, obs):
-            return np.zeros(8, dtype=np.float32)
-
     def make(limit: int | None = None) -> tuple[gym.Env, object]:
         env = gym.make(env_id, obs_mode="state", control_mode="pd_joint_delta_pos",
                        reward_mode="normalized_dense", max_episode_steps=limit)
-        return env, make_rl_oracle(env) if policy == "oracle" else ZeroPolicy()
+        return env, make_rl_oracle(env) if policy == "oracle" else ZeroActions(8)
 
     env, agent = make()
     won = {}

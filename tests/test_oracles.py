@@ -2,23 +2,12 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from conftest import CANONICAL_IDS, LONG_IDS, REGISTERED_IDS, SHORT_IDS
-from mikasa_oracles import make_oracle, rollout
+from mikasa_oracles import ZeroActions, make_oracle, rollout
 from mikasa_wrappers import apply_mikasa_vla_wrappers
 
 BENCH_SEED = 4242424242
-
-
-class ZeroPolicy:
-    """Sends all-zero actions."""
-
-    def reset(self) -> None:
-        pass
-
-    def forward(self, obs):
-        return np.zeros(7, dtype=np.float32)
 
 
 def _success_count(env, policy, seeds, stop_on_success=True) -> int:
@@ -44,13 +33,13 @@ def test_oracle_solves_first_seeds(make_env, env_id):
 @pytest.mark.parametrize("env_id", _param_ids(SHORT_IDS))
 def test_zero_actions_never_succeed_short(make_env, env_id):
     env = make_env(env_id)
-    assert _success_count(env, ZeroPolicy(), range(BENCH_SEED, BENCH_SEED + 3)) == 0
+    assert _success_count(env, ZeroActions(7), range(BENCH_SEED, BENCH_SEED + 3)) == 0
 
 
 @pytest.mark.parametrize("env_id", _param_ids(LONG_IDS))
 def test_zero_actions_never_succeed_long(make_env, env_id):
     env = make_env(env_id)
-    assert _success_count(env, ZeroPolicy(), [BENCH_SEED]) == 0
+    assert _success_count(env, ZeroActions(7), [BENCH_SEED]) == 0
 
 
 def test_oracle_unchanged_in_rgb_through_canonical_wrappers(make_env):
@@ -97,4 +86,4 @@ def test_oracle_success_rate_50_seeds(make_env, env_id):
     env = make_env(env_id)
     seeds = range(BENCH_SEED, BENCH_SEED + 50)
     assert _success_count(env, make_oracle(env), seeds) >= 48  # ≥ 95 %
-    assert _success_count(env, ZeroPolicy(), seeds, stop_on_success=False) == 0
+    assert _success_count(env, ZeroActions(7), seeds, stop_on_success=False) == 0

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from mikasa_oracles import rollout
+from mikasa_oracles import ZeroActions, rollout
 from mikasa_robo_rl import get_rl_task, rl_env_ids
 from mikasa_robo_rl.oracles import make_rl_oracle
 from mikasa_robo_rl.wrappers import apply_rl_wrappers
@@ -30,16 +30,6 @@ EXTENDED = 3
 TARGET = 0.95
 
 
-class ZeroPolicy:
-    """Sends all-zero joint deltas."""
-
-    def reset(self) -> None:
-        pass
-
-    def forward(self, obs):
-        return np.zeros(8, dtype=np.float32)
-
-
 @pytest.fixture
 def make_rl_env(make_env):
     def _make(env_id: str, **kwargs):
@@ -60,7 +50,7 @@ def _extended_env(make_rl_env, env_id: str):
 @pytest.mark.parametrize("env_id", RL_IDS)
 def test_oracle_solves_first_seeds_and_zero_actions_do_not(make_rl_env, env_id):
     env = make_rl_env(env_id)
-    assert not rollout(env, ZeroPolicy(), SEED, stop_on_success=False).success_once
+    assert not rollout(env, ZeroActions(8), SEED, stop_on_success=False).success_once
     if env_id in TIME_BOUND:
         env = _extended_env(make_rl_env, env_id)
     # A few seeds: most, not all (ids at 96 % fail one seed in 25; the rate is the slow test's).
@@ -91,7 +81,7 @@ def test_oracle_success_rate_50_seeds(make_rl_env, env_id):
     measured = TIME_BOUND.get(env_id, 1.0)
     target = math.ceil(TARGET * 50) if measured >= TARGET else int(measured * 50) - 2  # or no regression
     assert _successes(env, make_rl_oracle(env), seeds) >= target
-    assert _successes(env, ZeroPolicy(), seeds, stop_on_success=False) == 0
+    assert _successes(env, ZeroActions(8), seeds, stop_on_success=False) == 0
     if env_id in TIME_BOUND:
         env = _extended_env(make_rl_env, env_id)
         assert _successes(env, make_rl_oracle(env), seeds) >= math.ceil(TARGET * 50)

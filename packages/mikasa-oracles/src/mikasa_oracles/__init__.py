@@ -9,7 +9,7 @@ import gymnasium as gym
 from mikasa_oracles.families import ALL_ORACLES
 from mikasa_oracles.families.selection import SelectionOracle
 from mikasa_oracles.joint_delta import EEDeltaToJointDelta, JointDeltaOracle
-from mikasa_oracles.rollout import Rollout, rollout
+from mikasa_oracles.rollout import Rollout, ZeroActions, rollout
 
 __version__ = "0.1.0"
 
@@ -39,6 +39,7 @@ def make_oracle(env: gym.Env, **kwargs) -> Any:
 
 
 __all__ = [
+    "ZeroActions",
     "ORACLES",
     "EEDeltaToJointDelta",
     "JointDeltaOracle",

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import gymnasium as gym
+import numpy as np
 
 
 class Policy(Protocol):
@@ -14,6 +15,21 @@ class Policy(Protocol):
     def reset(self) -> None: ...
 
     def forward(self, obs: Any) -> Any: ...
+
+
+class ZeroActions:
+    """The baseline a memory task must defeat: all-zero actions of ``action_dim`` values
+    (7 for ``pd_ee_delta_pose``, 8 for ``pd_joint_delta_pos``)."""
+
+    def __init__(self, action_dim: int) -> None:
+        self.action_dim = int(action_dim)
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def forward(self, obs: Any) -> np.ndarray:
+        """Zeros, float32."""
+        return np.zeros(self.action_dim, dtype=np.float32)
 
 
 @dataclass(frozen=True)
