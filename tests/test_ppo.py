@@ -120,10 +120,10 @@ TINY = ["--num-envs", "2", "--num-eval-envs", "1", "--num-steps", "8", "--num-ev
 def test_state_trainer_runs_two_iterations_and_reloads_its_checkpoint(ppo, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     ppo.main(["--env-id", ENV_ID, "--include-state", *TINY])
-    checkpoints = sorted(tmp_path.rglob("*.pt"))
-    assert [p.name for p in checkpoints] == ["ckpt_0_1.pt", "final_ckpt.pt"]
+    assert sorted(p.name for p in tmp_path.rglob("*.pt")) == ["ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
     assert any(tmp_path.rglob("events.out.tfevents.*"))
-    result = ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--evaluate", "--checkpoint", str(checkpoints[-1])])
+    result = ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--evaluate", "--checkpoint",
+                       str(next(tmp_path.rglob("final_ckpt.pt")))])
     assert result["episodes"] == 0 and "success_once" not in result  # 8 steps < the horizon
 
 
@@ -163,3 +163,57 @@ def test_shipped_state_checkpoint_solves_its_task(ppo, tmp_path, monkeypatch):
     result = ppo.main(["--env-id", ENV_ID, "--include-state", "--evaluate", "--checkpoint", str(checkpoint),
                        "--num-eval-envs", "4", "--num-eval-steps", "60", "--num-workers", "0", "--no-capture-video"])
     assert result["episodes"] == 4 and result["success_once"] == 1.0
+
+
+def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
+    # --time-limit 0 stops after the first iteration with resume.pt written; --resume goes on
+    # in the same run directory from iteration 2 and ends with the final checkpoint.
+    monkeypatch.chdir(tmp_path)
+    flags = ["--env-id", ENV_ID, "--include-state", *TINY]
+    assert ppo.main([*flags, "--time-limit", "0"]) == {"stopped_early": 1.0}
+    (resume_file,) = tmp_path.rglob("resume.pt")
+    state = torch.load(resume_file, weights_only=False)
+    assert (state["iteration"], state["global_step"]) == (1, 16)
+    assert not any(tmp_path.rglob("final_ckpt.pt"))
+    ppo.main([*flags, "--resume", str(resume_file)])
+    assert [p.relative_to(resume_file.parent).as_posix() for p in sorted(tmp_path.rglob("*.pt"))] == [
+        "ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
+    assert torch.load(resume_file, weights_only=False)["global_step"] == 32
+    with pytest.raises(ValueError, match="env_id 'RememberColor3-v0'"):
+        ppo.main(["--env-id", "RememberColor5-v0", "--include-state", *TINY, "--resume", str(resume_file)])
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        ppo.main([*flags, "--resume", "nowhere/resume.pt"])
+
+
+VLA_ID = "RememberColor3-VLA-v0"
+
+
+@pytest.mark.parametrize(
+    "mode, shapes",
+    [
+        ("state", {"proprio": (2, 7), "state": (2, 35)}),
+        ("rgb_joints", {"proprio": (2, 7), "rgb": (2, 128, 128, 6)}),
+        ("rgb", {"rgb": (2, 128, 128, 6)}),
+    ],
+)
+def test_vector_env_takes_vla_ids_with_the_canonical_chain(mode, shapes):
+    with CpuVectorEnv(SubEnvSpec(VLA_ID, mode), 2, workers=0) as env:
+        assert env.single_action_space.shape == (7,)  # pd_ee_delta_pose: 6 + gripper
+        obs, _ = env.reset(seed=0)
+        assert {k: tuple(v.shape) for k, v in obs.items()} == shapes
+        obs, reward, *_ = env.step(torch.zeros(2, 7))
+        assert reward.shape == (2,)
+
+
+def test_vla_ids_reject_oracle_modes_and_noop_steps():
+    with pytest.raises(ValueError, match="not available for VLA ids"):
+        CpuVectorEnv(SubEnvSpec(VLA_ID, "rgb_oracle"), 1, workers=0)
+    with pytest.raises(ValueError, match="noop_steps applies to the RL ids only"):
+        CpuVectorEnv(SubEnvSpec(VLA_ID, noop_steps=3), 1, workers=0)
+
+
+def test_state_trainer_runs_on_a_vla_id(ppo, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ppo.main(["--env-id", VLA_ID, "--include-state", *TINY])
+    state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
+    assert state["critic.0.weight"].shape[1] == 7 + 35  # proprio, then state

@@ -49,8 +49,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     log = run.log.scalar
 
     # Agent.
-    next_obs, _ = envs.reset(seed=args.seed)
-    eval_envs.reset(seed=args.seed)
+    next_obs, _ = envs.reset(seed=run.env_seed)
+    eval_envs.reset(seed=run.env_seed)
     action_dim = int(np.prod(envs.single_action_space.shape))
     if mode == "state":
         agent = AgentStateOnly(flatten_state_obs(next_obs).shape[1], action_dim).to(device)
@@ -61,6 +61,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     if args.checkpoint:
         agent.load_state_dict(torch.load(args.checkpoint, map_location=device, weights_only=True))
     optimizer = optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
+    start_iteration, global_step = run.restore(agent, optimizer)  # (1, 0) unless --resume
 
     # Rollout storage.
     obs = {k: torch.zeros((args.num_steps, *v.shape), dtype=v.dtype, device=device) for k, v in next_obs.items()}
@@ -82,9 +83,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         run.close()
         return result
 
-    global_step = 0
     next_done = torch.zeros(num_envs, device=device)
-    for iteration in range(1, args.num_iterations + 1):
+    for iteration in range(start_iteration, args.num_iterations + 1):
         final_values = torch.zeros((args.num_steps, num_envs), device=device)
         if iteration % args.eval_freq == 1:
             evaluate(global_step)
@@ -152,8 +152,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 break
         update_time = time.time() - update_start
 
-        run.end_iteration(iteration, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values,
-                          b_returns, rollout_time, update_time)
+        if run.end_iteration(iteration, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values,
+                          b_returns, rollout_time, update_time):
+            return run.stop_early()
 
     return run.finish(agent, evaluate(global_step))
 

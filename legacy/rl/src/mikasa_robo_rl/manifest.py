@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 
-from mikasa_envs.manifest import UnknownEnvIdError
+from mikasa_envs.manifest import UnknownEnvIdError, get_task, list_tasks
 
 MEMORY_TYPES: tuple[str, ...] = ("Object", "Spatial", "Sequential", "Capacity")
 
@@ -97,3 +97,20 @@ def get_rl_task(env_id: str) -> RLTaskSpec:
         return _by_id()[env_id]
     except (KeyError, TypeError):
         raise UnknownEnvIdError(unknown_rl_env_message(env_id)) from None
+
+
+def trainable_horizon(env_id: str) -> int:
+    """The horizon of an id the PPO trainers accept: one of the 32 RL ids or any
+    ``mikasa_envs`` (VLA) id. ``UnknownEnvIdError`` naming close ids of both otherwise."""
+    if env_id in _by_id():
+        return _by_id()[env_id].max_episode_steps
+    try:
+        return get_task(env_id).max_episode_steps
+    except UnknownEnvIdError:
+        known = [*rl_env_ids(), *(t.env_id for t in list_tasks())]
+        close = difflib.get_close_matches(str(env_id), known, n=3, cutoff=0.6)
+        hint = f" Did you mean: {', '.join(close)}?" if close else ""
+        raise UnknownEnvIdError(
+            f"Unknown environment: {env_id!r}.{hint} The trainers take the {len(rl_env_ids())} RL ids "
+            "(mikasa_robo_rl.rl_env_ids()) and the VLA ids (mikasa_envs.list_tasks())."
+        ) from None

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import tyro
 
-from mikasa_robo_rl.manifest import get_rl_task
+from mikasa_robo_rl.manifest import trainable_horizon
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
 __all__ = [
@@ -105,6 +105,10 @@ class PPOArgs:
     reward_mode: str = "normalized_dense"
     num_workers: int | None = None
     """env worker processes (default: one per CPU core, at most one per env); 0 = in this process"""
+    resume: str | None = None
+    """a run's resume.pt: go on with that run (networks, optimizer, step counters, RNG, run directory)"""
+    time_limit: float | None = None
+    """stop after the iteration that passes this many seconds, resume.pt saved (to chain time-limited jobs)"""
 
 
 def observation_mode(args: PPOArgs) -> str:
@@ -326,30 +330,72 @@ class Run:
     eval_envs: CpuVectorEnv
     log: RunLog
     save_dir: Path
+    resumed: dict[str, Any] | None = None
+    """the loaded resume.pt of a ``--resume`` run"""
     saves: int = 0
     start_time: float = field(default_factory=time.time)
+    start_step: int = 0
+    agent: torch.nn.Module | None = None
+    optimizer: torch.optim.Optimizer | None = None
+
+    @property
+    def env_seed(self) -> int:
+        """Seed of the first env reset: ``--seed``, moved on by the iteration of a resumed
+        run (so that it does not replay the first piece's episodes)."""
+        return self.args.seed + (self.resumed["iteration"] if self.resumed else 0)
+
+    def restore(self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer) -> tuple[int, int]:
+        """Keep ``agent`` and ``optimizer`` for the resume state; with ``--resume`` load
+        theirs and the RNG. Returns (first iteration, global step) to go on from."""
+        self.agent, self.optimizer = agent, optimizer
+        if not self.resumed:
+            return 1, 0
+        state = self.resumed
+        agent.load_state_dict(state["agent"])
+        optimizer.load_state_dict(state["optimizer"])
+        torch.set_rng_state(state["torch_rng"])
+        np.random.set_state(state["numpy_rng"])
+        self.saves, self.start_step = state["saves"], state["global_step"]
+        print(f"resumed {self.save_dir} after iteration {state['iteration']} (step {state['global_step']})")
+        return state["iteration"] + 1, state["global_step"]
 
     def save(self, agent: torch.nn.Module, name: str | None = None, iteration: int | None = None) -> None:
         """Checkpoint ``agent`` (with ``--save-model``): ``name``, or the next periodic
         ``ckpt_<k>_<iteration>.pt``."""
         if not self.args.save_model:
             return
-        self.save_dir.mkdir(parents=True, exist_ok=True)
         if name is None:
             name = f"ckpt_{self.saves}_{iteration}.pt"
             self.saves += 1
-        torch.save(agent.state_dict(), self.save_dir / name)
+        _save_atomically(agent.state_dict(), self.save_dir / name)
 
     def end_iteration(
         self, iteration: int, global_step: int, lr: float, stats: dict[str, torch.Tensor], clipfracs: list[float],
         values: torch.Tensor, returns: torch.Tensor, rollout_time: float, update_time: float,
-    ) -> None:
-        """Log an iteration's scalars (§5.3) and print its progress line."""
-        sps = int(global_step / (time.time() - self.start_time))
+    ) -> bool:
+        """Log an iteration's scalars (§5.3), print its progress line and write
+        ``resume.pt``. True when ``--time-limit`` has passed: the trainer then stops."""
+        sps = int((global_step - self.start_step) / (time.time() - self.start_time))
         log_iteration(self.log, global_step, lr, stats, clipfracs, values, returns, sps, rollout_time, update_time,
                       self.num_envs * self.args.num_steps)
         print(f"iteration {iteration}/{self.args.num_iterations}: step {global_step}, SPS {sps}, "
               f"rollout {rollout_time:.1f} s, update {update_time:.1f} s", flush=True)
+        if self.args.save_model and self.agent is not None and self.optimizer is not None:
+            _save_atomically(
+                dict(agent=self.agent.state_dict(), optimizer=self.optimizer.state_dict(), iteration=iteration,
+                     global_step=global_step, saves=self.saves, save_dir=str(self.save_dir),
+                     env_id=self.args.env_id, mode=self.mode, torch_rng=torch.get_rng_state(),
+                     numpy_rng=np.random.get_state()),
+                self.save_dir / RESUME_FILE,
+            )
+        limit = self.args.time_limit
+        return limit is not None and time.time() - self.start_time >= limit and iteration < self.args.num_iterations
+
+    def stop_early(self) -> dict[str, float]:
+        """End a run cut by ``--time-limit`` (no final eval); says how to go on."""
+        print(f"--time-limit reached; go on with: --resume {self.save_dir / RESUME_FILE} (and the same flags)")
+        self.close()
+        return {"stopped_early": 1.0}
 
     def finish(self, agent: torch.nn.Module, final_eval: dict[str, float]) -> dict[str, float]:
         """Save ``final_ckpt.pt``, close everything; returns ``final_eval``."""
@@ -365,13 +411,36 @@ class Run:
         self.log.close()
 
 
+RESUME_FILE = "resume.pt"
+
+
+def _save_atomically(obj: Any, path: Path) -> None:
+    """``torch.save`` to a temporary name, then rename: a run killed mid-write keeps the
+    previous file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _load_resume_state(path: str, args: PPOArgs, mode: str) -> dict[str, Any]:
+    """The resume state at ``path``, checked against this run's id and mode."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--resume {path}: no such file (a run's {RESUME_FILE}, in its run directory)")
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    for key, value in (("env_id", args.env_id), ("mode", mode)):
+        if state.get(key) != value:
+            raise ValueError(f"--resume {path} is a run with {key} {state.get(key)!r}, this run has {value!r}")
+    return state
+
+
 def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -> Run:
     """Validate the flags and set a run up (§2-§3, §7): the derived sizes, seeding
     (python, numpy, torch), the device, the training and eval envs and the logs.
     ``whole_env_minibatches``: minibatches are whole envs (the LSTM), so ``num_envs`` must be
     a multiple of ``num_minibatches``."""
     mode = observation_mode(args)
-    horizon = get_rl_task(args.env_id).max_episode_steps  # unknown ids fail here, naming close ones
+    horizon = trainable_horizon(args.env_id)  # unknown ids fail here, naming close ones
     if args.evaluate and not args.checkpoint:
         raise ValueError("--evaluate needs --checkpoint")
     num_envs = 1 if args.evaluate else args.num_envs
@@ -386,6 +455,12 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
     if args.capture_video:
         print("note: --capture-video is not implemented for CPU envs yet; no videos are written")
     run_name, save_dir = run_directory(args, mode, script)
+    resumed = None
+    if args.resume:
+        if args.evaluate:
+            raise ValueError("--resume continues training; --evaluate takes --checkpoint")
+        resumed = _load_resume_state(args.resume, args, mode)
+        save_dir = Path(resumed["save_dir"])
 
     random.seed(args.seed)
     np.random.seed(args.seed)
@@ -395,4 +470,4 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
 
     envs, eval_envs = make_envs(args, mode, num_envs, device)
     print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
-    return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir)
+    return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir, resumed)

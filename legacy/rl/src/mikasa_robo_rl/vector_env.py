@@ -5,7 +5,8 @@ available everywhere, so :class:`CpuVectorEnv` runs ``num_envs`` single CPU envs
 processes (``mikasa_envs.workers``, the process loop the bench and the collectors use) and
 presents them as one batch: ``reset`` / ``step`` take and return batched torch tensors.
 
-Each sub-env is ``gym.make(<id>, num_envs=1, sim_backend="cpu")`` with the RL wrapper chain,
+Each sub-env is ``gym.make(<id>, num_envs=1, sim_backend="cpu")`` with the RL wrapper chain
+(a VLA id: the canonical VLA chain, ``mikasa_robo_rl.wrappers.apply_vla_rl_wrappers``),
 wrapped in ManiSkill's own ``ManiSkillVectorEnv`` (``ignore_terminations``,
 ``record_metrics``: ``episode`` = ``success_once`` / ``return`` / ``episode_len`` / ...);
 this module resets finished sub-envs with seeds of their own (``final_observation``,
@@ -45,7 +46,8 @@ class SubEnvSpec:
     mode: str = "state"
     """An RL observation mode (``mikasa_robo_rl.wrappers.OBS_MODES``)."""
     reward_mode: str = "normalized_dense"
-    control_mode: str = "pd_joint_delta_pos"
+    control_mode: str | None = None
+    """None: the id's own (``mikasa_robo_rl.wrappers.default_control_mode``)."""
     noop_steps: int = 1
     reconfiguration_freq: int | None = None
     ignore_terminations: bool = True
@@ -53,17 +55,31 @@ class SubEnvSpec:
     make_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def make(self) -> gym.Env:
-        """One sub-env: ``gym.make`` on the CPU sim, the RL chain, ``ManiSkillVectorEnv``."""
+        """One sub-env: ``gym.make`` on the CPU sim, the RL chain (the VLA chain for a VLA
+        id), ``ManiSkillVectorEnv``."""
         from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
-        from mikasa_robo_rl.wrappers import apply_rl_wrappers, env_info, env_obs_mode
+        from mikasa_robo_rl.manifest import trainable_horizon
+        from mikasa_robo_rl.wrappers import (
+            apply_rl_wrappers,
+            apply_vla_rl_wrappers,
+            default_control_mode,
+            env_info,
+            env_obs_mode,
+            is_vla_env_id,
+        )
 
-        env_info(self.env_id, self.noop_steps)  # an unknown id fails here, naming close ones
+        trainable_horizon(self.env_id)  # an unknown id fails here, naming close RL and VLA ids
+        vla = is_vla_env_id(self.env_id)
+        if vla and self.noop_steps != 1:
+            raise ValueError(f"noop_steps applies to the RL ids only; {self.env_id} is a VLA id (use 1)")
+        if not vla:
+            env_info(self.env_id, self.noop_steps)
         env = gym.make(
             self.env_id,
             num_envs=1,
             obs_mode=env_obs_mode(self.mode),
-            control_mode=self.control_mode,
+            control_mode=self.control_mode or default_control_mode(self.env_id),
             reward_mode=self.reward_mode,
             render_mode=self.render_mode,
             reconfiguration_freq=self.reconfiguration_freq,
@@ -71,7 +87,10 @@ class SubEnvSpec:
             **self.make_kwargs,
         )
         try:
-            env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
+            if vla:
+                env = apply_vla_rl_wrappers(env, self.mode)
+            else:
+                env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
             return ManiSkillVectorEnv(
                 env, 1, auto_reset=False, ignore_terminations=self.ignore_terminations, record_metrics=True
             )

@@ -28,6 +28,9 @@ from mikasa_wrappers import (
     RotateRenderAngleInfoWrapper,
     ShellGameRenderCupInfoWrapper,
     StateOnlyTensorToDictWrapper,
+    VLA_WRAPPER_CONFIGS,
+    apply_mikasa_vla_state_wrappers,
+    apply_mikasa_vla_wrappers,
 )
 
 from mikasa_robo_rl.manifest import UnknownEnvIdError, get_rl_task, unknown_rl_env_message
@@ -105,6 +108,43 @@ def _check_mode(mode: str) -> None:
         raise ValueError(f"unknown RL observation mode {mode!r}; accepted values: {', '.join(OBS_MODES)}")
 
 
+# Online RL on the VLA ids (beyond the release): the canonical chain's observations.
+VLA_OBS_MODES: tuple[str, ...] = ("state", "rgb", "rgb_joints")
+RL_CONTROL_MODE = "pd_joint_delta_pos"
+VLA_CONTROL_MODE = "pd_ee_delta_pose"
+
+
+def is_vla_env_id(env_id: str) -> bool:
+    """Whether ``env_id`` is a MIKASA-Robo VLA id (one with a canonical wrapper chain)."""
+    return env_id in VLA_WRAPPER_CONFIGS
+
+
+def default_control_mode(env_id: str) -> str:
+    """The control mode an id is trained with: the VLA chain's end-effector deltas for VLA
+    ids, the release's joint deltas for the RL ids."""
+    return VLA_CONTROL_MODE if is_vla_env_id(env_id) else RL_CONTROL_MODE
+
+
+def apply_vla_rl_wrappers(env: gym.Env, mode: str = "rgb_joints") -> gym.Env:
+    """The VLA wrapper chain in an RL observation ``mode`` (``VLA_OBS_MODES``).
+
+    ``rgb_joints`` is the canonical chain (``{"proprio": (B, 7), "rgb": (B, 128, 128, 6)}``
+    + ``task_cue``); ``rgb`` the same without ``proprio``; ``state`` the privileged-state
+    chain (``{"proprio", "state"}`` + ``task_cue``). VLA ids have no ``oracle_info``.
+    """
+    if mode not in VLA_OBS_MODES:
+        raise ValueError(f"RL mode {mode!r} is not available for VLA ids (they have no oracle_info); "
+                         f"accepted values: {', '.join(VLA_OBS_MODES)}")
+    if mode == "state":
+        return apply_mikasa_vla_state_wrappers(env)
+    env = apply_mikasa_vla_wrappers(env)
+    if mode == "rgb":
+        max_episode_steps = env.max_episode_steps
+        env = gym.wrappers.FilterObservation(env, [k for k in env.observation_space.spaces if k != "proprio"])
+        env.max_episode_steps = max_episode_steps
+    return env
+
+
 def apply_rl_wrappers(env: gym.Env, mode: str = "rgb_joints", noop_steps: int = 1) -> gym.Env:
     """The RL release's wrapper chain for an env made with ``gym.make(<RL id>, ...)``.
 
@@ -142,7 +182,13 @@ __all__ = [
     "RotateRenderAngleInfoWrapper",
     "ShellGameRenderCupInfoWrapper",
     "StateOnlyTensorToDictWrapper",
+    "RL_CONTROL_MODE",
+    "VLA_CONTROL_MODE",
+    "VLA_OBS_MODES",
     "apply_rl_wrappers",
+    "apply_vla_rl_wrappers",
+    "default_control_mode",
+    "is_vla_env_id",
     "env_info",
     "env_obs_mode",
 ]

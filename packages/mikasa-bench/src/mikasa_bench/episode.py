@@ -256,57 +256,16 @@ def _tee(*sinks: Callable[[np.ndarray], None]) -> Callable[[np.ndarray], None]:
 
 
 def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> Any:
-    """The non-canonical ``obs_mode="state"`` chain.
-
-    Same action path as the canonical chain (the task's curriculum wrapper), and the same
-    7-value ``proprio``; the images are replaced by the flat privileged ``state`` vector.
-    ``include_overlays`` adds the task's render overlays (videos), as in the rgb chain.
-    """
-    import gymnasium as gym
-    import torch
-    from gymnasium import spaces
-    from mani_skill.utils.gym_utils import find_max_episode_steps_value
-    from mikasa_wrappers import (
-        VLA_WRAPPER_CONFIGS,
-        ConvertJointsToEEFXyzRpyGripperWrapper,
-        FlattenRGBDObservationWrapper,
-        apply_chain_head,
-    )
+    """The non-canonical ``obs_mode="state"`` chain (`mikasa_wrappers.apply_mikasa_vla_state_wrappers`):
+    the canonical action path and 7-value ``proprio``, the flat privileged ``state`` vector
+    in place of the images."""
+    from mikasa_wrappers import VLA_WRAPPER_CONFIGS, apply_mikasa_vla_state_wrappers
 
     from .errors import UnknownTaskError
 
-    config = VLA_WRAPPER_CONFIGS.get(env_id)
-    if config is None:
+    if env_id not in VLA_WRAPPER_CONFIGS:
         raise UnknownTaskError(f"env id {env_id!r} has no canonical wrapper configuration")
-    max_steps = find_max_episode_steps_value(env)
-
-    class _ProprioFromAgent(gym.ObservationWrapper):
-        """Add ``proprio`` = [tcp_pose, qpos, qvel] (the rgb-mode layout) to the state obs."""
-
-        def __init__(self, inner: gym.Env) -> None:
-            super().__init__(inner)
-            n = int(getattr(inner.unwrapped, "num_envs", 1))
-            base = inner.unwrapped
-            dim = 7 + 2 * int(base.agent.robot.get_qpos().shape[-1])
-            entries = {"proprio": spaces.Box(-np.inf, np.inf, (n, dim), np.float32)}
-            entries.update(inner.observation_space.spaces)
-            self.observation_space = spaces.Dict(entries)
-
-        def observation(self, obs: dict) -> dict:
-            base = self.env.unwrapped
-            robot = base.agent.robot
-            proprio = torch.cat(
-                [base.agent.tcp.pose.raw_pose, robot.get_qpos(), robot.get_qvel()], dim=-1
-            ).to(torch.float32)
-            return {"proprio": proprio, **obs}
-
-    wrapped: Any = apply_chain_head(env, config, include_overlays=include_overlays)
-    wrapped = FlattenRGBDObservationWrapper(
-        wrapped, rgb=False, depth=False, state=True, oracle=False, joints=False
-    )
-    wrapped = ConvertJointsToEEFXyzRpyGripperWrapper(_ProprioFromAgent(wrapped))
-    wrapped.max_episode_steps = int(max_steps) if max_steps is not None else None
-    return wrapped
+    return apply_mikasa_vla_state_wrappers(env, include_overlays=include_overlays)
 
 
 def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> Any:

@@ -7,6 +7,9 @@ import warnings
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
 from mikasa_envs.manifest import list_tasks
 
 from . import overlays as ov
@@ -22,6 +25,7 @@ __all__ = [
     "VLA_WRAPPER_CONFIGS",
     "MIKASA_VLA_ENV_IDS",
     "apply_mikasa_vla_wrappers",
+    "apply_mikasa_vla_state_wrappers",
     "apply_chain_head",
     "REQUIRED_OBS_MODE",
 ]
@@ -226,3 +230,50 @@ def apply_mikasa_vla_wrappers(env: gym.Env, *, include_overlays: bool = False) -
     if config is None:
         raise _unknown_id_error(env_id)
     return _apply_config(env, config, include_overlays=include_overlays)
+
+
+class _ProprioFromAgent(gym.ObservationWrapper):
+    """Add ``proprio`` = [tcp_pose, qpos, qvel] (the rgb chain's layout before its
+    conversion to 7 values) in front of a state-mode observation."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        base = env.unwrapped
+        n = int(getattr(base, "num_envs", 1))
+        dim = 7 + 2 * int(base.agent.robot.get_qpos().shape[-1])
+        entries = {"proprio": spaces.Box(-np.inf, np.inf, (n, dim), np.float32)}
+        entries.update(env.observation_space.spaces)
+        self.observation_space = spaces.Dict(entries)
+
+    def observation(self, obs: dict) -> dict:
+        base = self.env.unwrapped
+        robot = base.agent.robot
+        proprio = torch.cat([base.agent.tcp.pose.raw_pose, robot.get_qpos(), robot.get_qvel()], dim=-1)
+        return {"proprio": proprio.to(torch.float32), **obs}
+
+
+def apply_mikasa_vla_state_wrappers(env: gym.Env, *, include_overlays: bool = False) -> gym.Wrapper:
+    """The privileged-state counterpart of `apply_mikasa_vla_wrappers` (not the published
+    contract: for RL in the MDP view, and the bench's ``obs_mode="state"``).
+
+    For a VLA env made with ``obs_mode="state"``: the same action path (the task's
+    curriculum wrapper) and the same 7-value ``proprio``, with the flat privileged ``state``
+    vector in place of the images. The result observes ``{"proprio": (B, 7), "state":
+    (B, D)}`` (+ ``task_cue`` where the family sets one) and has ``max_episode_steps``.
+    ``include_overlays`` adds the task's render overlays (videos). Raises ``ValueError``
+    for an id outside `MIKASA_VLA_ENV_IDS` or an ``obs_mode`` other than ``"state"``.
+    """
+    env_id = _env_id(env)
+    config = VLA_WRAPPER_CONFIGS.get(env_id)
+    if config is None:
+        raise _unknown_id_error(env_id)
+    obs_mode = getattr(env.unwrapped, "obs_mode", None)
+    if obs_mode != "state":
+        raise ValueError(f"the MIKASA VLA state chain needs obs_mode='state', but this env was made with "
+                         f"obs_mode={obs_mode!r}")
+    max_episode_steps = _find_max_episode_steps(env)
+    wrapped = apply_chain_head(env, config, include_overlays=include_overlays)
+    wrapped = FlattenRGBDObservationWrapper(wrapped, rgb=False, depth=False, state=True, oracle=False, joints=False)
+    wrapped = ConvertJointsToEEFXyzRpyGripperWrapper(_ProprioFromAgent(wrapped))
+    wrapped.max_episode_steps = max_episode_steps
+    return wrapped
