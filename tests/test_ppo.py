@@ -217,3 +217,16 @@ def test_state_trainer_runs_on_a_vla_id(ppo, tmp_path, monkeypatch):
     ppo.main(["--env-id", VLA_ID, "--include-state", *TINY])
     state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
     assert state["critic.0.weight"].shape[1] == 7 + 35  # proprio, then state
+
+
+def test_capture_video_records_eval_episodes(ppo, tmp_path, monkeypatch):
+    # Training evals record the first eval env under the run's videos/; --evaluate records
+    # videos and the trajectory beside the checkpoint (test_videos/), as upstream.
+    monkeypatch.chdir(tmp_path)
+    flags = [a for a in TINY if a != "--no-capture-video"]
+    ppo.main(["--env-id", ENV_ID, "--include-state", *flags, "--num-eval-envs", "2", "--render-mode", "rgb_array"])
+    (run_dir,) = {p.parent for p in tmp_path.rglob("final_ckpt.pt")}
+    assert len(list((run_dir / "videos").glob("*.mp4"))) == 2  # one per eval pass
+    ppo.main(["--env-id", ENV_ID, "--include-state", *flags, "--evaluate", "--checkpoint",
+              str(run_dir / "final_ckpt.pt")])
+    assert {p.suffix for p in (run_dir / "test_videos").iterdir()} == {".mp4", ".h5", ".json"}

@@ -16,16 +16,21 @@ TAGS = ("eval/success_once", "eval/return")
 
 
 def read_curves(path: Path) -> dict[str, list[tuple[int, float]]]:
-    """{tag: [(env step, value), ...]} of TAGS from an event file (or the newest one in a directory)."""
+    """{tag: [(env step, value), ...]} of TAGS from an event file, or from all event files
+    of a run directory (a ``--resume``d run adds one per piece; a later piece's point wins)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     files = [path] if path.is_file() else sorted(path.rglob("events.out.tfevents.*"))
     if not files:
         raise ValueError(f"no TensorBoard event file at {path}")
-    events = EventAccumulator(str(files[-1]))
-    events.Reload()
-    present = events.Tags()["scalars"]
-    return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in TAGS if tag in present}
+    curves: dict[str, dict[int, float]] = {}
+    for file in files:  # event files are named by creation time: oldest first
+        events = EventAccumulator(str(file))
+        events.Reload()
+        for tag in TAGS:
+            if tag in events.Tags()["scalars"]:
+                curves.setdefault(tag, {}).update((e.step, e.value) for e in events.Scalars(tag))
+    return {tag: sorted(points.items()) for tag, points in curves.items()}
 
 
 def main() -> None:

@@ -47,7 +47,7 @@ class PPOArgs:
     wandb_project_name: str = "ManiSkill-MemoryBench"
     wandb_entity: str | None = None
     capture_video: bool = True
-    """record eval videos (not yet implemented for CPU envs: ignored, with a notice)"""
+    """record eval videos (the first eval env's episodes, under the run's videos/)"""
     save_model: bool = True
     """write checkpoints"""
     evaluate: bool = False
@@ -165,19 +165,29 @@ def estimate_advantages(
     return advantages
 
 
-def make_envs(args: PPOArgs, mode: str, num_envs: int, device: torch.device) -> tuple[CpuVectorEnv, CpuVectorEnv]:
-    """(training envs, eval envs): CPU sub-envs in worker processes, batched (§3.2)."""
+def make_envs(
+    args: PPOArgs, mode: str, num_envs: int, device: torch.device, save_dir: Path
+) -> tuple[CpuVectorEnv, CpuVectorEnv]:
+    """(training envs, eval envs): CPU sub-envs in worker processes, batched (§3.2). With
+    ``--capture-video`` the first eval sub-env records its episodes: to ``save_dir/videos``,
+    or with ``--evaluate`` (trajectories too) to ``test_videos`` beside the checkpoint."""
 
-    def spec(reconfiguration_freq: int | None, partial_reset: bool) -> SubEnvSpec:
+    def spec(reconfiguration_freq: int | None, partial_reset: bool, **video: Any) -> SubEnvSpec:
         return SubEnvSpec(
             args.env_id, mode, reward_mode=args.reward_mode, noop_steps=args.noop_steps,
-            reconfiguration_freq=reconfiguration_freq, ignore_terminations=not partial_reset,
+            reconfiguration_freq=reconfiguration_freq, ignore_terminations=not partial_reset, **video,
         )
 
+    video: dict[str, Any] = {}
+    if args.capture_video:
+        video_dir = Path(args.checkpoint).parent / "test_videos" if args.evaluate else save_dir / "videos"
+        video = dict(video_dir=str(video_dir), save_trajectory=args.evaluate, render_mode=args.render_mode,
+                     max_steps_per_video=args.num_eval_steps)
     envs = CpuVectorEnv(spec(args.reconfiguration_freq, args.partial_reset), num_envs, args.num_workers, device)
     try:
         eval_envs = CpuVectorEnv(
-            spec(args.eval_reconfiguration_freq, args.eval_partial_reset), args.num_eval_envs, args.num_workers, device
+            spec(args.eval_reconfiguration_freq, args.eval_partial_reset, **video),
+            args.num_eval_envs, args.num_workers, device,
         )
     except BaseException:
         envs.close()
@@ -452,8 +462,8 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
                          "(a minibatch is whole envs' sequences)")
     if args.minibatch_size < 1:
         raise ValueError(f"num_envs * num_steps = {args.batch_size} is smaller than num_minibatches = {args.num_minibatches}")
-    if args.capture_video:
-        print("note: --capture-video is not implemented for CPU envs yet; no videos are written")
+    if args.save_train_video_freq is not None:
+        print("note: --save-train-video-freq is not implemented for CPU envs; no training videos are written")
     run_name, save_dir = run_directory(args, mode, script)
     resumed = None
     if args.resume:
@@ -468,6 +478,6 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
-    envs, eval_envs = make_envs(args, mode, num_envs, device)
+    envs, eval_envs = make_envs(args, mode, num_envs, device, save_dir)
     print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
     return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir, resumed)

@@ -21,7 +21,7 @@ import multiprocessing as mp
 import os
 import queue
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -53,10 +53,16 @@ class SubEnvSpec:
     ignore_terminations: bool = True
     render_mode: str | None = None
     make_kwargs: dict[str, Any] = field(default_factory=dict)
+    video_dir: str | None = None
+    """record sub-env 0's episodes here (ManiSkill's ``RecordEpisode``; needs ``render_mode``)"""
+    save_trajectory: bool = False
+    """with ``video_dir``: also save sub-env 0's trajectories (``trajectory.h5`` / ``.json``)"""
+    max_steps_per_video: int | None = None
 
-    def make(self) -> gym.Env:
-        """One sub-env: ``gym.make`` on the CPU sim, the RL chain (the VLA chain for a VLA
-        id), ``ManiSkillVectorEnv``."""
+    def make(self, index: int = 0) -> gym.Env:
+        """Sub-env ``index``: ``gym.make`` on the CPU sim, the RL chain (the VLA chain for a
+        VLA id), ``RecordEpisode`` for sub-env 0 when ``video_dir`` is set,
+        ``ManiSkillVectorEnv``."""
         from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
         from mikasa_robo_rl.manifest import trainable_horizon
@@ -91,6 +97,14 @@ class SubEnvSpec:
                 env = apply_vla_rl_wrappers(env, self.mode)
             else:
                 env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
+            if self.video_dir is not None and index == 0:
+                from mani_skill.utils.wrappers.record import RecordEpisode
+
+                if self.render_mode is None:
+                    raise ValueError("recording videos needs a render_mode (e.g. 'rgb_array' or 'all')")
+                env = RecordEpisode(env, self.video_dir, save_trajectory=self.save_trajectory,
+                                    trajectory_name="trajectory", max_steps_per_video=self.max_steps_per_video,
+                                    video_fps=30, avoid_overwriting_video=True)
             return ManiSkillVectorEnv(
                 env, 1, auto_reset=False, ignore_terminations=self.ignore_terminations, record_metrics=True
             )
@@ -119,8 +133,8 @@ class _SubEnvs:
     would depend on how the sub-envs are spread over processes.
     """
 
-    def __init__(self, spec: SubEnvSpec, count: int) -> None:
-        self.envs = [spec.make() for _ in range(count)]
+    def __init__(self, spec: SubEnvSpec, count: int, first_index: int = 0) -> None:
+        self.envs = [spec.make(first_index + i) for i in range(count)]
         self.seeders = [np.random.RandomState() for _ in range(count)]
 
     def _reset(self, i: int, seed: int | None) -> tuple[Any, Any]:
@@ -153,19 +167,19 @@ class _SubEnvs:
             env.close()
 
 
-def _start_sub_envs(spec: SubEnvSpec, count: int) -> _SubEnvs:
+def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int) -> _SubEnvs:
     from mikasa_envs.workers import quiet_worker
 
     quiet_worker()
     import mikasa_robo_rl  # noqa: F401  (registers the RL ids in the spawned interpreter)
 
-    return _SubEnvs(spec, count)
+    return _SubEnvs(spec, count, first_index)
 
 
-def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, inbox: Any, outbox: Any) -> None:
+def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, first_index: int, inbox: Any, outbox: Any) -> None:
     from mikasa_envs.workers import serve_jobs
 
-    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count))
+    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index))
 
 
 def _stack(parts: list[Any], device: torch.device) -> Any:
@@ -197,7 +211,8 @@ class CpuVectorEnv:
         workers = default_vector_workers(num_envs) if workers is None else int(workers)
         if workers < 0:
             raise ValueError(f"workers must be >= 0, got {workers}")
-        probe = spec.make()  # spaces, and a clear error for a bad id or mode before any fork
+        # Spaces, and a clear error for a bad id or mode before any fork (no recording).
+        probe = replace(spec, video_dir=None).make()
         self.single_observation_space = probe.single_observation_space
         self.single_action_space = probe.single_action_space
         self.max_episode_steps = find_max_episode_steps_value(probe)
@@ -214,7 +229,7 @@ class CpuVectorEnv:
         self._outbox = ctx.Queue()
         self._inboxes = [ctx.Queue() for _ in range(workers)]
         self._processes = [
-            ctx.Process(target=_worker_main, args=(w, spec, n, inbox, self._outbox), daemon=True,
+            ctx.Process(target=_worker_main, args=(w, spec, n, sum(self._counts[:w]), inbox, self._outbox), daemon=True,
                         name=f"mikasa-rl-env-{w}")
             for w, (n, inbox) in enumerate(zip(self._counts, self._inboxes, strict=True))
         ]
