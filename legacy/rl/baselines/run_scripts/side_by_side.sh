@@ -1,27 +1,28 @@
 #!/usr/bin/env bash
-# Train several PPO-MLP runs side by side on one machine, each in its own directory, each
+# Train several PPO runs side by side on one machine, each in its own directory, each
 # resumed from its latest resume.pt when there is one (so a machine lent for a limited time
 # can chain calls of this script), each stopped by --time-limit.
 #
 #   bash legacy/rl/baselines/run_scripts/side_by_side.sh LIMIT_S RUNS_FILE [WORK_DIR] [ARCHIVE_DIR]
 #
-# RUNS_FILE: one run per line, "<name> <ppo_memtasks.py flags...>" ('#' starts a comment);
+# RUNS_FILE: one run per line, "<name> <trainer> <flags...>" with <trainer> ppo_memtasks.py or
+# ppo_memtasks_lstm.py ('#' starts a comment);
 # runs/<name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/.
 # With ARCHIVE_DIR, each run's directory (without the periodic ckpt_*.pt) is packed into
 # ARCHIVE_DIR/<name>.tgz at the end. Run from the repository root; PYTHON (default python3)
 # is the interpreter that has mikasa-robo-rl[train].
 set -u
 limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archive=${4:-}
-root=$(pwd); trainer=$root/legacy/rl/baselines/ppo/ppo_memtasks.py; python=${PYTHON:-python3}
+root=$(pwd); python=${PYTHON:-python3}
 export OMP_NUM_THREADS=1  # the env workers and trainers share the cores
 names=()
-while read -r name flags; do
+while read -r name trainer flags; do
   [[ -z "$name" || "$name" == \#* ]] && continue
   names+=("$name"); mkdir -p "$work/$name"
   resume=$(cd "$work/$name" && find . -name resume.pt | sort | tail -1)
   # shellcheck disable=SC2086  # the flags are words
   (cd "$work/$name" && echo "== $(date +%T) start ${resume:+--resume $resume}" >>log.txt &&
-   exec "$python" "$trainer" $flags ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
+   exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
 done <"$runs_file"
 wait
 for name in "${names[@]}"; do
