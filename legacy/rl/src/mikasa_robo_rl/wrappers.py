@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 from mikasa_wrappers import (
     MISSING_VALUE_SENTINEL,
+    VLA_WRAPPER_CONFIGS,
     CameraShutdownWrapper,
     DebugRewardWrapper,
     FlattenRGBDObservationWrapper,
@@ -28,7 +29,6 @@ from mikasa_wrappers import (
     RotateRenderAngleInfoWrapper,
     ShellGameRenderCupInfoWrapper,
     StateOnlyTensorToDictWrapper,
-    VLA_WRAPPER_CONFIGS,
     apply_mikasa_vla_state_wrappers,
     apply_mikasa_vla_wrappers,
 )
