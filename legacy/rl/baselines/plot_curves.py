@@ -3,7 +3,8 @@
     python legacy/rl/baselines/plot_curves.py RUN_DIR_OR_EVENT_FILE [...] --labels "PPO-MLP state" \\
         --out legacy/rl/baselines/curves/RememberColor3-v0_state
 
-Plots ``eval/success_once`` and ``eval/return`` against env steps, one line per run.
+Plots ``eval/success_once`` and ``eval/return`` (or the ``--tags`` given, e.g. ``train/return``)
+against env steps, one line per run.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ from pathlib import Path
 TAGS = ("eval/success_once", "eval/return")
 
 
-def read_curves(path: Path) -> dict[str, list[tuple[int, float]]]:
-    """{tag: [(env step, value), ...]} of TAGS from an event file, or from all event files
+def read_curves(path: Path, tags: tuple[str, ...] = TAGS) -> dict[str, list[tuple[int, float]]]:
+    """{tag: [(env step, value), ...]} of ``tags`` from an event file, or from all event files
     of a run directory (a ``--resume``d run adds one per piece; a later piece's point wins)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -27,17 +28,26 @@ def read_curves(path: Path) -> dict[str, list[tuple[int, float]]]:
     for file in files:  # event files are named by creation time: oldest first
         events = EventAccumulator(str(file))
         events.Reload()
-        for tag in TAGS:
+        for tag in tags:
             if tag in events.Tags()["scalars"]:
                 curves.setdefault(tag, {}).update((e.step, e.value) for e in events.Scalars(tag))
     return {tag: sorted(points.items()) for tag, points in curves.items()}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("runs", nargs="+", type=Path, help="run directories or event files")
-    parser.add_argument("--labels", nargs="*", default=None, help="one label per run (default: the paths)")
-    parser.add_argument("--out", required=True, help="output path without extension (.png and .json are written)")
+    parser.add_argument(
+        "--labels", nargs="*", default=None, help="one label per run (default: the paths)"
+    )
+    parser.add_argument(
+        "--tags", nargs="+", default=list(TAGS), help=f"scalars to plot (default: {' '.join(TAGS)})"
+    )
+    parser.add_argument(
+        "--out", required=True, help="output path without extension (.png and .json are written)"
+    )
     args = parser.parse_args()
     labels = args.labels or [str(r) for r in args.runs]
     if len(labels) != len(args.runs):
@@ -48,9 +58,11 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves = {label: read_curves(run) for label, run in zip(labels, args.runs, strict=True)}
-    fig, axes = plt.subplots(1, len(TAGS), figsize=(5 * len(TAGS), 3.5))
-    for ax, tag in zip(axes, TAGS, strict=True):
+    tags = tuple(args.tags)
+    curves = {label: read_curves(run, tags) for label, run in zip(labels, args.runs, strict=True)}
+    fig, axes = plt.subplots(1, len(tags), figsize=(5 * len(tags), 3.5), squeeze=False)
+    axes = axes[0]
+    for ax, tag in zip(axes, tags, strict=True):
         for label, runs in curves.items():
             if tag in runs:
                 steps, values = zip(*runs[tag], strict=True)
@@ -58,7 +70,8 @@ def main() -> None:
         ax.set_xlabel("env steps")
         ax.set_title(tag)
         ax.grid(alpha=0.3)
-    axes[0].set_ylim(-0.02, 1.02)
+        if tag.endswith("success_once"):
+            ax.set_ylim(-0.02, 1.02)
     axes[0].legend()
     fig.tight_layout()
     out = Path(args.out)
