@@ -1,4 +1,4 @@
-"""The ``mikasa-bench`` command line: list, run, quickstart, report, compare.
+"""The ``mikasa-bench`` command line: list, run, quickstart, report, compare, serve.
 
 Exit codes: 0 success; 1 ``compare`` found a significant regression; 2 a usage or
 input error (the message says what was expected); 130 interrupted (results so far are
@@ -104,8 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="POLICY",
-        help="zero | random | oracle | module:Class | path/file.py[:Class] "
-        "(repeatable: each policy gets its own run directory)",
+        help="zero | random | oracle | module:Class | path/file.py[:Class] | ws://HOST:PORT "
+        "(a policy server; repeatable: each policy gets its own run directory)",
     )
     run.add_argument(
         "--policy-kwargs",
@@ -196,6 +196,26 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("dir_a", metavar="DIR_A")
     cmp_.add_argument("dir_b", metavar="DIR_B")
     cmp_.add_argument("--alpha", type=float, default=0.05, help="significance level (0.05)")
+
+    srv = sub.add_parser(
+        "serve",
+        help="serve a policy over a websocket (openpi's protocol) for run --policy ws://HOST:PORT",
+        description="Serve a policy to `mikasa-bench run --policy ws://HOST:PORT`: msgpack over "
+        "a websocket, one policy instance per connection (pip install 'mikasa-bench[remote]').",
+    )
+    srv.add_argument(
+        "--policy",
+        required=True,
+        metavar="POLICY",
+        help="zero | random | module:Class | path/file.py[:Class] (not oracle: it needs an env)",
+    )
+    srv.add_argument(
+        "--policy-kwargs", default=None, metavar="JSON", help="keyword arguments for the policy"
+    )
+    srv.add_argument("--port", type=int, default=8000, help="port to listen on (default 8000)")
+    srv.add_argument(
+        "--host", default="0.0.0.0", help="address to listen on (default 0.0.0.0: every one)"
+    )
     return p
 
 
@@ -424,7 +444,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     if not args.policy:
         raise BenchError(
-            "choose a policy: --policy zero | random | oracle | module:Class | path/file.py[:Class]"
+            "choose a policy: --policy zero | random | oracle | module:Class | "
+            "path/file.py[:Class] | ws://HOST:PORT"
         )
     kwargs = _parse_kwargs(args.policy_kwargs)
     if kwargs and len(args.policy) > 1:
@@ -550,12 +571,37 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 1 if comp.regressions else 0
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import logging
+
+    from .policies import resolve_policy
+    from .remote import PolicyServer
+
+    spec = resolve_policy(args.policy, _parse_kwargs(args.policy_kwargs))
+    server = PolicyServer(spec, host=args.host, port=args.port)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    logging.getLogger("websockets").setLevel(logging.WARNING)
+
+    def ready(s: PolicyServer) -> None:
+        _eprint(
+            f"serving policy {spec.label or spec.target!r} on {args.host}:{s.port}; "
+            f"evaluate it with: mikasa-bench run --policy ws://HOST:{s.port} ... (Ctrl-C stops)"
+        )
+
+    try:
+        server.serve_forever(on_ready=ready)
+    except KeyboardInterrupt:
+        _eprint("stopped")
+    return 0
+
+
 _COMMANDS = {
     "list": _cmd_list,
     "run": _cmd_run,
     "quickstart": _cmd_quickstart,
     "report": _cmd_report,
     "compare": _cmd_compare,
+    "serve": _cmd_serve,
 }
 
 

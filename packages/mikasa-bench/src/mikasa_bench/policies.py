@@ -43,6 +43,7 @@ __all__ = [
     "policy_chunk_size",
     "reset_policy",
     "check_policy_supports",
+    "is_remote_target",
 ]
 
 ACTION_SHAPE: tuple[int, ...] = (7,)
@@ -158,9 +159,14 @@ BUILTIN_POLICIES: dict[str, Callable[..., Any]] = {
 
 _BUILTIN_HELP = (
     "expected one of the built-in policies (zero, random, oracle), 'package.module:Name', "
-    "or 'path/to/file.py[:Name]' (Name: a policy class or factory; default make_policy "
-    "or Policy)"
+    "'path/to/file.py[:Name]' (Name: a policy class or factory; default make_policy "
+    "or Policy) or a policy server 'ws://HOST:PORT'"
 )
+
+
+def is_remote_target(target: str) -> bool:
+    """Whether ``target`` names a policy server (``ws://HOST:PORT``, see `mikasa_bench.remote`)."""
+    return target.startswith(("ws://", "wss://"))
 
 
 @dataclass(frozen=True)
@@ -247,6 +253,10 @@ def _load_module(module_part: str) -> Any:
 def _load_factory(target: str) -> Callable[..., Any]:
     if target in BUILTIN_POLICIES:
         return BUILTIN_POLICIES[target]
+    if is_remote_target(target):
+        from .remote import remote_policy_factory
+
+        return remote_policy_factory(target)
     module_part, attr = _split_target(target)
     module = _load_module(module_part)
     names = [attr] if attr else ["make_policy", "Policy"]
@@ -285,6 +295,10 @@ def resolve_policy(name: str, kwargs: dict[str, Any] | None = None) -> PolicySpe
     if not isinstance(name, str) or not name.strip():
         raise BenchError(f"empty policy name; {_BUILTIN_HELP}")
     name = name.strip()
+    if is_remote_target(name):
+        from .remote import resolve_remote_policy
+
+        return resolve_remote_policy(name, kwargs)
     if name in BUILTIN_POLICIES:
         target, label = name, name
     else:
