@@ -8,8 +8,9 @@
 # RUNS_FILE: one run per line, "<name> <trainer> <flags...>" with <trainer> ppo_memtasks.py or
 # ppo_memtasks_lstm.py ('#' starts a comment);
 # runs/<name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/.
-# With ARCHIVE_DIR, each run's directory (without the periodic ckpt_*.pt) is packed into
-# ARCHIVE_DIR/<name>.tgz at the end. Run from the repository root; PYTHON (default python3)
+# With ARCHIVE_DIR, each run's directory is packed into ARCHIVE_DIR/<name>.tgz at the end,
+# with only the KEEP_CKPTS (default 3) latest periodic ckpt_*.pt (a state checkpoint is
+# ~1.2 MB, an rgb one ~10 MB, and a lent machine returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
 # is the interpreter that has mikasa-robo-rl[train].
 set -u
 limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archive=${4:-}
@@ -28,6 +29,12 @@ wait
 for name in "${names[@]}"; do
   grep -h "eval @\|Error" "$work/$name/log.txt" | tail -2 | sed "s/^/$name: /"
   tail -1 "$work/$name/log.txt" | sed "s/^/$name: /"
-  [ -n "$archive" ] && tar czf "$archive/$name.tgz" -C "$work/$name" --exclude='ckpt_*' .
+  if [ -n "$archive" ]; then
+    keep=$(cd "$work/$name" && find . -name 'ckpt_*.pt' -printf '%T@ %p\n' | sort -n | tail -"${KEEP_CKPTS:-3}" | cut -d' ' -f2)
+    # shellcheck disable=SC2086  # the kept paths are words
+    tar cf "$archive/$name.tar" -C "$work/$name" --exclude='ckpt_*' .
+    [ -n "$keep" ] && tar rf "$archive/$name.tar" -C "$work/$name" $keep
+    gzip -c "$archive/$name.tar" >"$archive/$name.tgz" && rm "$archive/$name.tar"
+  fi
 done
 exit 0
