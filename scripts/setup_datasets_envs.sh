@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Create the optional dataset-conversion environment `.venv-datasets` (RLDS + LeRobot).
+# Create the optional LeRobot/RLDS environment `.venv-datasets`: dataset conversion (RLDS +
+# LeRobot) and LeRobot policies on the MIKASA tasks (`mikasa-bench run --policy lerobot:DIR`,
+# `lerobot-eval --env.type=mikasa`).
 #
 # Why a separate environment: lerobot 0.4.x (the line that writes LeRobotDataset v3.0 on
 # Python 3.11) pins torch<2.11, while this repository's dev environment runs torch 2.13.0
@@ -7,7 +9,8 @@
 # CUDA wheels). TensorFlow and lerobot *can* share one environment, so RLDS and LeRobot live
 # together here: the RLDS -> LeRobot converter needs both in one process.
 #
-# What it installs (see packages/mikasa-datasets/README.md, "Conversion environment"):
+# What it installs (see packages/mikasa-datasets/README.md, "Conversion environment", and
+# packages/mikasa-bench/README.md, "LeRobot policies and lerobot-eval"):
 #   * FFmpeg shared libraries (Debian `ffmpeg`): torchcodec, the decoder LeRobotDataset uses
 #     to read videos back, links against them. Encoding uses PyAV's bundled FFmpeg.
 #   * tensorflow-cpu + tensorflow-datasets           (mikasa-datasets[rlds])
@@ -16,6 +19,14 @@
 #     dataset code imports                            (mikasa-datasets[lerobot])
 #   * mikasa-datasets itself, editable, with --no-deps: the converters import only numpy,
 #     mikasa_datasets and the format libraries, never mikasa-envs / ManiSkill.
+#   * mikasa-envs, mikasa-wrappers, mikasa-oracles, mikasa-bench, editable, with their
+#     dependencies (mani-skill==3.0.1, sapien==3.0.3, gymnasium, ...), and the runtime
+#     dependencies of lerobot's policy and evaluation code (draccus, deepdiff, diffusers for
+#     Diffusion Policy, imageio, jsonlines), resolved in one pip run together with the pins
+#     above so the CPU torch 2.13.0 and numpy<2.4 stay (lerobot's own metadata would ask
+#     for torch<2.11). Then `python -m mikasa_envs.setup_assets`, as scripts/setup.sh does:
+#     the envs use only the robot assets shipped in the mani-skill wheel plus the light
+#     meshes generated from them, so ManiSkill never prompts for or starts a download.
 #
 # Idempotent: a stamp file records the pinned set; re-running with the same pins is a no-op.
 # Usage: scripts/setup_datasets_envs.sh     (env: PYTHON=python3.11, MIKASA_DATASETS_VENV=path)
@@ -50,7 +61,28 @@ PINS=(
   "pytest>=8"
 )
 LEROBOT="lerobot==0.4.4"
-stamp_text="$(printf '%s\n' "${PINS[@]}" "$LEROBOT")"
+# The MIKASA envs and mikasa-bench (editable), and what lerobot's policy / eval code imports
+# beyond PINS (lerobot.policies.factory, lerobot.envs.factory, lerobot.scripts.lerobot_eval;
+# the bounds are lerobot 0.4.4's). Installed with PINS in one resolver run (step 3).
+ENV_PACKAGES=(
+  "-e" "packages/mikasa-envs"
+  "-e" "packages/mikasa-wrappers"
+  "-e" "packages/mikasa-oracles"
+  "-e" "packages/mikasa-bench"
+)
+LEROBOT_RUNTIME=(
+  "draccus==0.10.0"
+  "gymnasium>=1.1.1,<2"
+  "deepdiff>=7.0.1,<9"
+  "diffusers>=0.27.2,<0.36"
+  "imageio[ffmpeg]>=2.34,<3"
+  "jsonlines>=4,<5"
+  "termcolor>=2.4,<4"
+  "einops>=0.8,<0.9"
+  # lerobot.envs.configs imports lerobot.robots, whose motor buses import `serial`.
+  "pyserial>=3.5,<4"
+)
+stamp_text="$(printf '%s\n' "${PINS[@]}" "$LEROBOT" "${ENV_PACKAGES[@]}" "${LEROBOT_RUNTIME[@]}")"
 stamp="$VENV/.mikasa-datasets-env"
 
 # 1. FFmpeg shared libraries (torchcodec dlopens libavcodec & co.).
@@ -62,9 +94,29 @@ if ! ldconfig -p 2>/dev/null | grep -q 'libavcodec\.so\.'; then
   echo "[datasets-env] ffmpeg: $((SECONDS - t0)) s"
 fi
 
+# The editable installs are refreshed when the checkout moved or a package's pyproject.toml
+# changed (entry points, ...): five editable builds cost ~20 s, and the test suite runs this
+# script before each of its .venv-datasets test files.
+EDITABLE_DIRS=(packages/mikasa-datasets packages/mikasa-envs packages/mikasa-wrappers
+  packages/mikasa-oracles packages/mikasa-bench)
+editable_stamp="$VENV/.mikasa-editable"
+editable_text="$root $(cat "${EDITABLE_DIRS[@]/%//pyproject.toml}" | sha256sum | cut -c1-16)"
+editables_current() {
+  [ -f "$editable_stamp" ] && [ "$(cat "$editable_stamp")" = "$editable_text" ] &&
+    "$VENV/bin/python" - "$root" <<'PY'
+import importlib.util, sys
+root = sys.argv[1] + "/packages/"
+names = ("mikasa_datasets", "mikasa_envs", "mikasa_wrappers", "mikasa_oracles", "mikasa_bench")
+specs = [importlib.util.find_spec(n) for n in names]  # locates, does not import
+sys.exit(0 if all(s is not None and (s.origin or "").startswith(root) for s in specs) else 1)
+PY
+}
+
 if [ -x "$VENV/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$stamp_text" ]; then
-  # Still refresh the editable install (cheap) in case the checkout moved.
-  "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets
+  if ! editables_current; then
+    "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets "${ENV_PACKAGES[@]}"
+    printf '%s' "$editable_text" > "$editable_stamp"
+  fi
   echo "[datasets-env] up to date: $VENV"
   exit 0
 fi
@@ -86,5 +138,17 @@ echo "[datasets-env] format libraries: $((SECONDS - t0)) s"
 # code needs only what PINS already holds.
 "$VENV/bin/python" -m pip install -q --no-deps "$LEROBOT" 2> >(grep -v "is ignored: it is neither" >&2)
 "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets
+# 3. The MIKASA envs + mikasa-bench and lerobot's policy/eval runtime. PINS are repeated so
+# this resolver run keeps torch 2.13.0 CPU, torchvision and numpy<2.4 where they are.
+t1=$SECONDS
+# (the grep also drops pip's report that the --no-deps lerobot's own pins are unmet: known,
+# see above; a conflict of any other package still shows)
+"$VENV/bin/python" -m pip install -q "${PINS[@]}" "${LEROBOT_RUNTIME[@]}" "${ENV_PACKAGES[@]}" \
+  2> >(grep -v -e "is ignored: it is neither" -e "^lerobot [0-9.]* requires " \
+    -e "^ERROR: pip's dependency resolver does not currently take" >&2)
+# The light robot meshes, generated from the mani-skill wheel's own assets (no download).
+"$VENV/bin/python" -m mikasa_envs.setup_assets >/dev/null
+echo "[datasets-env] envs + lerobot policy/eval runtime: $((SECONDS - t1)) s"
+printf '%s' "$editable_text" > "$editable_stamp"
 printf '%s' "$stamp_text" > "$stamp"
 echo "[datasets-env] done in $((SECONDS - t0)) s: $VENV/bin/mikasa-datasets --help"

@@ -67,8 +67,9 @@ def datasets_python() -> Path:
 def run_suite_in_datasets_env(test_file: str, timeout: int = 1500) -> None:
     """Run ``test_file`` with pytest inside `.venv-datasets`; fail with its output if red.
 
-    `--noconftest`: tests/conftest.py imports mikasa_envs/ManiSkill, which the conversion
-    environment deliberately does not have.
+    `--noconftest`: tests/conftest.py imports mikasa_envs/ManiSkill and lists every env id,
+    which the conversion tests do not need (the environment has them since it also runs
+    LeRobot policies on the tasks, tests/test_lerobot_policy.py).
     """
     python = datasets_python()
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}

@@ -105,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="POLICY",
         help="zero | random | oracle | module:Class | path/file.py[:Class] | ws://HOST:PORT "
-        "(a policy server; repeatable: each policy gets its own run directory)",
+        "(a policy server) | lerobot:DIR (a LeRobot pretrained_model directory; repeatable: "
+        "each policy gets its own run directory)",
     )
     run.add_argument(
         "--policy-kwargs",
@@ -207,7 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--policy",
         required=True,
         metavar="POLICY",
-        help="zero | random | module:Class | path/file.py[:Class] (not oracle: it needs an env)",
+        help="zero | random | module:Class | path/file.py[:Class] | lerobot:DIR (not oracle: it "
+        "needs an env)",
     )
     srv.add_argument(
         "--policy-kwargs", default=None, metavar="JSON", help="keyword arguments for the policy"
@@ -445,7 +447,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if not args.policy:
         raise BenchError(
             "choose a policy: --policy zero | random | oracle | module:Class | "
-            "path/file.py[:Class] | ws://HOST:PORT"
+            "path/file.py[:Class] | ws://HOST:PORT | lerobot:DIR"
         )
     kwargs = _parse_kwargs(args.policy_kwargs)
     if kwargs and len(args.policy) > 1:

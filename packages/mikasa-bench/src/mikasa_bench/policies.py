@@ -44,6 +44,7 @@ __all__ = [
     "reset_policy",
     "check_policy_supports",
     "is_remote_target",
+    "is_lerobot_target",
 ]
 
 ACTION_SHAPE: tuple[int, ...] = (7,)
@@ -160,13 +161,20 @@ BUILTIN_POLICIES: dict[str, Callable[..., Any]] = {
 _BUILTIN_HELP = (
     "expected one of the built-in policies (zero, random, oracle), 'package.module:Name', "
     "'path/to/file.py[:Name]' (Name: a policy class or factory; default make_policy "
-    "or Policy) or a policy server 'ws://HOST:PORT'"
+    "or Policy), a policy server 'ws://HOST:PORT' or a LeRobot pretrained policy "
+    "'lerobot:DIR'"
 )
 
 
 def is_remote_target(target: str) -> bool:
     """Whether ``target`` names a policy server (``ws://HOST:PORT``, see `mikasa_bench.remote`)."""
     return target.startswith(("ws://", "wss://"))
+
+
+def is_lerobot_target(target: str) -> bool:
+    """Whether ``target`` names a LeRobot pretrained policy (``lerobot:DIR``, see
+    `mikasa_bench.lerobot_policy`; lerobot itself is imported only when one is used)."""
+    return target.startswith("lerobot:")
 
 
 @dataclass(frozen=True)
@@ -257,6 +265,10 @@ def _load_factory(target: str) -> Callable[..., Any]:
         from .remote import remote_policy_factory
 
         return remote_policy_factory(target)
+    if is_lerobot_target(target):
+        from .lerobot_policy import lerobot_policy_factory
+
+        return lerobot_policy_factory(target)
     module_part, attr = _split_target(target)
     module = _load_module(module_part)
     names = [attr] if attr else ["make_policy", "Policy"]
@@ -299,6 +311,10 @@ def resolve_policy(name: str, kwargs: dict[str, Any] | None = None) -> PolicySpe
         from .remote import resolve_remote_policy
 
         return resolve_remote_policy(name, kwargs)
+    if is_lerobot_target(name):
+        from .lerobot_policy import resolve_lerobot_policy
+
+        return resolve_lerobot_policy(name, kwargs)
     if name in BUILTIN_POLICIES:
         target, label = name, name
     else:
