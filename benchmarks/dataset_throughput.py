@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         help="the simulator's Python (default: %(default)s)",
     )
     parser.add_argument("--_collect-child", nargs=4, help=argparse.SUPPRESS)
-    parser.add_argument("--vcodec", default="h264")
+    parser.add_argument("--vcodec", help="LeRobot video codec (default: the converter's)")
     parser.add_argument(
         "--workers", type=int, help="LeRobot writer processes (default: the converter's)"
     )
@@ -238,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     from mikasa_datasets import lerobot as lr
     from mikasa_datasets import rlds
     from mikasa_datasets.loaders import load_episodes, write_synthetic_task
+
+    args.vcodec = args.vcodec or lr.DEFAULT_VCODEC
 
     # Library start-up (TensorFlow ~5 s, torch/lerobot ~5 s) is not conversion throughput.
     rlds._builder_class()

@@ -1,7 +1,7 @@
-"""NPZ -> LeRobot v3 and RLDS -> LeRobot v3 (mikasa_datasets.lerobot): lerobot's own
-format, offline loading with LeRobotDataset, round trip (exact for state, action, reward,
-success, done and instruction; video frames within a PSNR tolerance), output protocol,
-corrupt input, CLI.
+"""NPZ -> LeRobot v3 and RLDS -> LeRobot v3 (mikasa_datasets.lerobot, written through
+lerobot's public API): lerobot's own format, offline loading with LeRobotDataset, round
+trip (exact for state, action, reward, success, done and instruction; video frames within
+a PSNR tolerance), image statistics, parallel writers, output protocol, corrupt input, CLI.
 
 Needs lerobot + tensorflow: in the main environment this file contributes one test that
 runs it inside `.venv-datasets` (see tests/test_validate.py for the mechanism).
@@ -20,9 +20,9 @@ import pytest
 IN_DATASETS_ENV = importlib.util.find_spec("tensorflow_datasets") is not None
 ENV_ID = "RotateLenientPos-VLA-v0"
 NAME = "rotate_lenient_pos_vla_v0"
-# Video tolerance: H.264 (libx264 crf 23, ultrafast, yuv420p) on render-like frames. Measured
-# on collected RememberColor3 renders 31.3 dB (AV1 at lerobot's settings: 30.4 dB); the
-# synthetic scenes here are harder. The bar: every camera-episode >= 28 dB.
+# Video tolerance: AV1 at lerobot's settings (SVT-AV1 crf 30, preset 12, GOP 2, yuv420p) on
+# render-like frames; collected RememberColor3 renders gave 30.5 dB (worst 29.1). The bar:
+# every camera-episode >= 28 dB.
 MIN_PSNR_DB = 28.0
 
 if not IN_DATASETS_ENV:
@@ -33,7 +33,7 @@ if not IN_DATASETS_ENV:
         run_suite_in_datasets_env(__file__)
 
 else:
-    from mikasa_datasets import cli, rlds
+    from mikasa_datasets import cli, lerobot_write, rlds
     from mikasa_datasets import lerobot as lr
     from mikasa_datasets.loaders import (
         DatasetFormatError,
@@ -77,7 +77,7 @@ else:
             assert feats[key]["dtype"] == "video"
             assert feats[key]["shape"] == [128, 128, 3]
             assert feats[key]["names"] == ["height", "width", "channel"]
-            assert feats[key]["info"]["video.codec"] == "h264"  # pinned (DEFAULT_VCODEC)
+            assert feats[key]["info"]["video.codec"] == "av1"  # pinned (DEFAULT_VCODEC)
             assert feats[key]["info"]["video.fps"] == 10
         assert feats[lr.STATE_KEY]["shape"] == [7] and feats[lr.ACTION_KEY]["shape"] == [7]
         for key in (
@@ -120,92 +120,35 @@ else:
     def test_image_stats_are_the_frames_stats(
         npz_task: Path, from_npz: lr.ConversionResult
     ) -> None:
-        # lerobot 0.4.x squares uint8 pixels in uint8 (wrapping) and wrote a wrong std.
+        """lerobot 0.4.4 squares uint8 pixels in uint8 (wrapping) and wrote a wrong image
+        std; stats.json's camera entries are recomputed from all frames."""
         stats = json.loads((from_npz.path / "meta" / "stats.json").read_text())
         source = load_episodes(npz_task)
         for key, cam in ((lr.TOP_KEY, slice(0, 3)), (lr.WRIST_KEY, slice(3, 6))):
-            pixels = np.concatenate([e["rgb"][..., cam].reshape(-1, 3) for e in source]) / 255.0
-            for name, expected in (("mean", pixels.mean(0)), ("std", pixels.std(0))):
-                got = np.ravel(stats[key][name])
-                np.testing.assert_allclose(got, expected, rtol=1e-9, err_msg=f"{key} {name}")
-        # the writer's fixes to lerobot last only as long as the write
-        from lerobot.datasets import compute_stats
-        from lerobot.datasets import lerobot_dataset as lerobot_module
-        from lerobot.datasets import utils as lerobot_utils
-
-        assert lerobot_module.embed_images is lerobot_utils.embed_images
-        assert not hasattr(compute_stats.RunningQuantileStats.update, "__wrapped__")
-
-    def test_uint8_stats_equal_lerobots_on_promoted_values() -> None:
-        from lerobot.datasets.compute_stats import RunningQuantileStats
-
-        rng = np.random.default_rng(3)
-        # narrow first, then wider ranges: the histograms are re-binned as lerobot does
-        batches = [rng.integers(100, 140, (500, 3), dtype=np.uint8)]
-        batches += [
-            rng.integers(lo, hi, (700, 3), dtype=np.uint8)
-            for lo, hi in ((90, 150), (0, 256), (5, 60))
-        ]
-        reference, ours = RunningQuantileStats(), RunningQuantileStats()
-        for batch in batches:
-            reference.update(batch.astype(np.float64))  # upstream's fix promotes; float64 is exact
-            lr._update_from_value_counts(ours, batch)
-        for a, b in zip(reference._histograms, ours._histograms, strict=True):
-            assert np.array_equal(a, b)
-        expected, got = reference.get_statistics(), ours.get_statistics()
-        assert expected.keys() == got.keys()
-        for key in expected:
-            np.testing.assert_allclose(got[key], expected[key], rtol=1e-12, err_msg=key)
-
-    def test_float_stats_equal_lerobots() -> None:
-        """The vectorised histogram and quantile loops give lerobot's numbers exactly."""
-        from lerobot.datasets.compute_stats import RunningQuantileStats, get_feature_stats
-
-        rng = np.random.default_rng(5)
-        arrays = [
-            rng.normal(size=(37, 7)).astype(np.float32),
-            rng.integers(0, 2, (23, 1)).astype(bool),
-            np.arange(40, dtype=np.int64),
-            np.full((9, 2), 3.5),
-        ]
-        batches = [rng.normal(size=(50, 3)) * s for s in (1.0, 0.5, 4.0)]  # range grows: re-binned
-        expected = [get_feature_stats(a, axis=0, keepdims=a.ndim == 1) for a in arrays]
-        reference = RunningQuantileStats()
-        for b in batches:
-            reference.update(b)
-        expected_running = reference.get_statistics()
-        with lr._lerobot_writer_fixes():
-            got = [get_feature_stats(a, axis=0, keepdims=a.ndim == 1) for a in arrays]
-            ours = RunningQuantileStats()
-            for b in batches:
-                ours.update(b)
-            got_running = ours.get_statistics()
-        for e, g in [*zip(expected, got, strict=True), (expected_running, got_running)]:
-            assert e.keys() == g.keys()
-            for key in e:
-                assert np.array_equal(e[key], g[key]), key
-
-    def test_writer_fixes_nest_and_are_undone() -> None:
-        from lerobot.datasets import compute_stats
-        from lerobot.datasets import lerobot_dataset as lerobot_module
-
-        original = (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images)
-        with lr._lerobot_writer_fixes():
-            patched = (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images)
-            assert patched[0] is not original[0] and patched[1] is not original[1]
-            with lr._lerobot_writer_fixes():  # a second write, e.g. in another thread
-                pass
-            assert (
-                compute_stats.RunningQuantileStats.update,
-                lerobot_module.embed_images,
-            ) == patched
-        assert (compute_stats.RunningQuantileStats.update, lerobot_module.embed_images) == original
+            pixels = np.concatenate([e["rgb"][..., cam].reshape(-1, 3) for e in source])
+            expected = {
+                "mean": pixels.mean(0) / 255.0,
+                "std": (pixels / 255.0).std(0),
+                "min": pixels.min(0) / 255.0,
+                "max": pixels.max(0) / 255.0,
+                **{
+                    f"q{int(q * 100):02d}": np.quantile(pixels, q, axis=0, method="inverted_cdf")
+                    / 255.0
+                    for q in (0.01, 0.10, 0.50, 0.90, 0.99)
+                },
+            }
+            assert set(stats[key]) == {*expected, "count"}
+            assert stats[key]["count"] == [sum(LENGTHS)]
+            for name, value in expected.items():
+                got = np.asarray(stats[key][name])
+                assert got.shape == (3, 1, 1), (key, name)
+                np.testing.assert_allclose(got.ravel(), value, rtol=1e-9, err_msg=f"{key} {name}")
 
     def test_video_files_are_cut_and_still_load(
         npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     ) -> None:
         # A tiny file size: every episode starts a new video file (no whole-file re-mux).
-        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
+        monkeypatch.setattr(lerobot_write, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
         r = lr.convert_npz_to_lerobot(npz_task, tmp_path)
         for key in (lr.TOP_KEY, lr.WRIST_KEY):
             assert len(list((r.path / "videos" / key).rglob("*.mp4"))) == len(LENGTHS)
@@ -222,7 +165,7 @@ else:
         npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     ) -> None:
         # Written one file per episode, then joined: a size that holds episodes 0 and 1.
-        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
+        monkeypatch.setattr(lerobot_write, "VIDEO_FILE_SIZE_IN_MB", 1e-6)
         apart = lr.convert_npz_to_lerobot(npz_task, tmp_path / "apart")
         sizes = {
             key: [f.stat().st_size for f in sorted((apart.path / "videos" / key).rglob("*.mp4"))]
@@ -231,7 +174,7 @@ else:
         pair = max(s[0] + s[1] for s in sizes.values()) * 1.01
         assert all(sum(s) >= pair for s in sizes.values())  # all three fit in no camera
         pair /= 2**20
-        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", pair)
+        monkeypatch.setattr(lerobot_write, "VIDEO_FILE_SIZE_IN_MB", pair)
         joined = lr.convert_npz_to_lerobot(npz_task, tmp_path / "joined")
         for key in (lr.TOP_KEY, lr.WRIST_KEY):
             assert len(list((joined.path / "videos" / key).rglob("*.mp4"))) == 2
@@ -255,11 +198,13 @@ else:
     def test_every_episode_video_decodes_on_its_own(
         npz_task: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, vcodec: str
     ) -> None:
-        """H.264 episodes come from one encoder per camera (each starting on a keyframe),
-        AV1 ones from an encoder per episode: either way each file is a whole video."""
+        """lerobot encodes every episode with an encoder of its own: with one episode per
+        file, each file is a whole video that starts on a keyframe."""
         import av
 
-        monkeypatch.setattr(lr, "VIDEO_FILE_SIZE_IN_MB", 1e-6)  # left one file per episode
+        monkeypatch.setattr(
+            lerobot_write, "VIDEO_FILE_SIZE_IN_MB", 1e-6
+        )  # left one file per episode
         r = lr.convert_npz_to_lerobot(npz_task, tmp_path / vcodec, vcodec=vcodec)
         source = load_episodes(npz_task)
         for key, cam in ((lr.TOP_KEY, slice(0, 3)), (lr.WRIST_KEY, slice(3, 6))):
@@ -271,8 +216,10 @@ else:
                 assert len(frames) == int(episode["episode_length"]) and frames[0].key_frame
                 decoded = np.stack([f.to_ndarray(format="rgb24") for f in frames])
                 assert lr.psnr(decoded, episode["rgb"][..., cam]) >= MIN_PSNR_DB
-        assert lr._EpisodeVideoEncoder(10, "h264", "yuv420p", 2, 30, None, 1).persistent
-        assert not lr._EpisodeVideoEncoder(10, "libsvtav1", "yuv420p", 2, 30, None, 1).persistent
+        info = json.loads((r.path / "meta" / "info.json").read_text())
+        assert info["features"][lr.TOP_KEY]["info"]["video.codec"] == (
+            "av1" if vcodec == "libsvtav1" else "h264"
+        )
 
     def test_loads_offline_with_lerobot_dataset(from_npz: lr.ConversionResult) -> None:
         import os
@@ -354,38 +301,82 @@ else:
             lr.convert_npz_to_lerobot(npz_task, tmp_path, repo_id_template="fixed")
 
     def test_parallel_writers_write_the_same_episodes(npz_task: Path, tmp_path: Path) -> None:
-        """Two writer processes, joined by lerobot's aggregation: the same dataset content
-        (every loaded array identical, frames included: each episode is encoded on its own)
-        and a dataset lerobot loads, with statistics over all episodes."""
-        single = load_episodes(
-            lr.convert_npz_to_lerobot(npz_task, tmp_path / "one", workers=1).path
-        )
+        """Two writer processes, joined by lerobot's aggregation, write the same data as
+        one: every loaded array identical (frames included: lerobot encodes each episode
+        on its own), the same frame and task tables, the same image statistics, and
+        lerobot's combined statistics of the other features equal up to rounding."""
+        one = lr.convert_npz_to_lerobot(npz_task, tmp_path / "one", workers=1)
         seen: list[tuple[int, int]] = []
         r = lr.convert_npz_to_lerobot(
             npz_task, tmp_path / "two", workers=2, progress=lambda d, n: seen.append((d, n))
         )
         assert (r.episodes, r.frames) == (3, sum(LENGTHS)) and seen[-1] == (3, 3)
-        parallel = load_episodes(r.path)
+        single, parallel = load_episodes(one.path), load_episodes(r.path)
         assert len(parallel) == len(single) == 3
         for a, b in zip(single, parallel, strict=True):
             for key in a:
                 assert np.array_equal(a[key], b[key]), key
-        info = json.loads((r.path / "meta" / "info.json").read_text())
-        assert (info["total_episodes"], info["total_frames"], info["total_tasks"]) == (
-            3,
-            sum(LENGTHS),
-            2,
+        info_1, episodes_1, frames_1, tasks_1 = lr.read_tables(one.path)
+        info_2, episodes_2, frames_2, tasks_2 = lr.read_tables(r.path)
+        assert tasks_1 == tasks_2 and len(tasks_2) == 2
+        assert frames_1.columns.equals(frames_2.columns)
+        for column in frames_1.columns:
+            assert np.array_equal(
+                np.stack(frames_1[column].to_numpy()), np.stack(frames_2[column].to_numpy())
+            ), column
+        for column in ("episode_index", "length", "dataset_from_index", "dataset_to_index"):
+            assert list(episodes_1[column]) == list(episodes_2[column]), column
+        for key in ("total_episodes", "total_frames", "total_tasks", "features", "fps"):
+            assert info_1[key] == info_2[key], key
+        assert info_2["video_files_size_in_mb"] == lr.VIDEO_FILE_SIZE_IN_MB
+        stats_1, stats_2 = (
+            json.loads((p / "meta" / "stats.json").read_text()) for p in (one.path, r.path)
         )
-        assert info["video_files_size_in_mb"] == lr.VIDEO_FILE_SIZE_IN_MB
+        assert stats_1.keys() == stats_2.keys()
+        for key in (lr.TOP_KEY, lr.WRIST_KEY):
+            assert stats_1[key] == stats_2[key], key  # from pixel counts: exact
+        for key in (lr.STATE_KEY, lr.ACTION_KEY, lr.REWARD_KEY):
+            assert stats_2[key]["count"] == [sum(LENGTHS)]
+            for name in ("min", "max", "mean", "std"):
+                np.testing.assert_allclose(stats_1[key][name], stats_2[key][name], rtol=1e-6)
         assert (r.path / lr.SOURCE_METADATA_NAME).is_file()
-        stats = json.loads((r.path / "meta" / "stats.json").read_text())
-        assert stats[lr.STATE_KEY]["count"] == [sum(LENGTHS)]
         dataset = lr.lerobot_dataset_class()(NAME, root=r.path)
         assert len(dataset) == sum(LENGTHS) and dataset[len(dataset) - 1]["episode_index"] == 2
         from mikasa_datasets.validate import validate_path
 
         assert validate_path(r.path).frames == sum(LENGTHS)
         assert sorted(p.name for p in (tmp_path / "two").iterdir()) == [NAME]  # no parts left
+
+    @pytest.mark.parametrize(("workers", "use_videos"), [(1, True), (2, True), (1, False)])
+    def test_finished_dataset_holds_only_its_own_files(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], workers: int, use_videos: bool
+    ) -> None:
+        """A user's report: six episodes converted with ``--from npz`` left six empty
+        ``tmp*`` folders (one per episode) in the finished dataset. A finished dataset
+        holds lerobot's files and the copied source metadata, nothing else."""
+        env_id = "RememberColor3-VLA-v0"
+        write_synthetic_task(tmp_path / "data_npz", env_id, [10, 11, 12, 13, 14, 15])
+        args = ["to-lerobot", "--root", str(tmp_path), "--task", env_id, "--from", "npz"]
+        args += ["--workers", str(workers)] + ([] if use_videos else ["--no-videos"])
+        assert cli.main(args) == 0
+        assert "6 episodes, 75 frames" in capsys.readouterr().out
+        root = tmp_path / "data_lerobot" / "remember_color_3_vla_v0"
+        assert [p.name for p in root.parent.iterdir()] == [root.name]
+        expected = [
+            r"data/chunk-\d{3}/file-\d{3}\.parquet",
+            r"meta/episodes/chunk-\d{3}/file-\d{3}\.parquet",
+            r"meta/(info\.json|stats\.json|tasks\.parquet)",
+            re.escape(lr.SOURCE_METADATA_NAME),
+        ]
+        if use_videos:
+            cameras = "|".join(re.escape(k) for k in (lr.TOP_KEY, lr.WRIST_KEY))
+            expected.append(rf"videos/({cameras})/chunk-\d{{3}}/file-\d{{3}}\.mp4")
+        files = [p.relative_to(root).as_posix() for p in root.rglob("*") if not p.is_dir()]
+        strays = [f for f in files if not any(re.fullmatch(e, f) for e in expected)]
+        assert strays == [], strays
+        empty = [p for p in root.rglob("*") if p.is_dir() and not any(p.iterdir())]
+        assert empty == [], empty  # e.g. tmp* folders, or images/ after a --no-videos write
+        assert len(load_episodes(root)) == 6
 
     def test_writer_count() -> None:
         assert lr.writer_count(None, 1) == 1

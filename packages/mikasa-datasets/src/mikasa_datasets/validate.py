@@ -462,7 +462,8 @@ def validate_lerobot(path: str | os.PathLike[str], *, quick: bool = False) -> Va
             )
         if tuple(ft.get("shape", ())) != shape:
             raise DatasetFormatError(
-                info_path, f"feature {name!r} has shape {ft.get('shape')}; expected {list(shape)}"
+                info_path,
+                f"feature {name!r} has shape {list(ft.get('shape', ()))}; expected {list(shape)}",
             )
     if not (root / "meta" / "stats.json").is_file():
         raise DatasetFormatError(root / "meta" / "stats.json", "missing")
