@@ -28,6 +28,7 @@ from .protocol import (
     SUPPORTED_SPLITS,
     BenchmarkConfig,
 )
+from .validity import add_validity_parser, run_validity
 
 __all__ = ["main", "build_parser", "QUICKSTART_TASKS", "QUICKSTART_POLICIES"]
 
@@ -104,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="POLICY",
-        help="zero | random | oracle | module:Class | path/file.py[:Class] | ws://HOST:PORT "
+        help="zero | random | oracle | oracle-memoryless | module:Class | path/file.py[:Class] | ws://HOST:PORT "
         "(a policy server) | lerobot:DIR (a LeRobot pretrained_model directory; repeatable: "
         "each policy gets its own run directory)",
     )
@@ -190,6 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rep.add_argument("--title", default=None)
 
+    add_validity_parser(sub)
     cmp_ = sub.add_parser(
         "compare",
         help="per-task deltas of B against A; exit 1 if B is significantly worse on any task",
@@ -208,8 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--policy",
         required=True,
         metavar="POLICY",
-        help="zero | random | module:Class | path/file.py[:Class] | lerobot:DIR (not oracle: it "
-        "needs an env)",
+        help="zero | random | module:Class | path/file.py[:Class] | lerobot:DIR (not oracle or "
+        "oracle-memoryless: they read the env's state)",
     )
     srv.add_argument(
         "--policy-kwargs", default=None, metavar="JSON", help="keyword arguments for the policy"
@@ -446,7 +448,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     if not args.policy:
         raise BenchError(
-            "choose a policy: --policy zero | random | oracle | module:Class | "
+            "choose a policy: --policy zero | random | oracle | oracle-memoryless | module:Class | "
             "path/file.py[:Class] | ws://HOST:PORT | lerobot:DIR"
         )
     kwargs = _parse_kwargs(args.policy_kwargs)
@@ -604,6 +606,7 @@ _COMMANDS = {
     "report": _cmd_report,
     "compare": _cmd_compare,
     "serve": _cmd_serve,
+    "validity": run_validity,
 }
 
 

@@ -151,15 +151,26 @@ def _make_oracle(env: Any, **kwargs: Any) -> Any:
     return make_oracle(env, **kwargs)
 
 
+def _make_memoryless_oracle(env: Any, **kwargs: Any) -> Any:
+    from mikasa_oracles import make_oracle
+
+    return make_oracle(env, memoryless=True, **kwargs)
+
+
+ORACLE_TARGETS: tuple[str, ...] = ("oracle", "oracle-memoryless")
+"""Built-ins that read the privileged state of the env they are built for."""
+
 BUILTIN_POLICIES: dict[str, Callable[..., Any]] = {
     "zero": ZeroPolicy,
     "random": RandomPolicy,
     "oracle": _make_oracle,
+    "oracle-memoryless": _make_memoryless_oracle,
 }
 """Built-in policy name -> factory."""
 
 _BUILTIN_HELP = (
-    "expected one of the built-in policies (zero, random, oracle), 'package.module:Name', "
+    "expected one of the built-in policies (zero, random, oracle, oracle-memoryless), "
+    "'package.module:Name', "
     "'path/to/file.py[:Name]' (Name: a policy class or factory; default make_policy "
     "or Policy), a policy server 'ws://HOST:PORT' or a LeRobot pretrained policy "
     "'lerobot:DIR'"
@@ -345,7 +356,7 @@ def resolve_policy(name: str, kwargs: dict[str, Any] | None = None) -> PolicySpe
 def check_policy_supports(spec: PolicySpec, env_ids: Sequence[str]) -> None:
     """Raise `BenchError` if ``spec`` cannot run on some task (the oracle exists only for
     some families)."""
-    if spec.target != "oracle":
+    if spec.target not in ORACLE_TARGETS:
         return
     from mikasa_oracles import has_oracle
 
@@ -365,7 +376,7 @@ def build_policy(spec: PolicySpec, env: Any, env_id: str, task: Any = None) -> A
     factory = _load_factory(spec.target)
     context = {"env": env, "env_id": env_id, "task": task}
     extra = {n: context[n] for n in _context_kwargs(factory)}
-    if spec.target == "oracle":
+    if spec.target in ORACLE_TARGETS:
         extra = {}
         policy = factory(env, **spec.kwargs)
     elif spec.target in ("zero", "random"):

@@ -24,6 +24,7 @@ from typing import Any
 from .errors import BenchError
 from .policies import (
     ACTION_SHAPE,
+    ORACLE_TARGETS,
     PolicySpec,
     build_policy,
     is_remote_target,
@@ -72,11 +73,11 @@ class PolicyServer:
 
     def __init__(self, spec: PolicySpec, host: str = "0.0.0.0", port: int = DEFAULT_PORT) -> None:
         require_remote_deps()
-        if spec.target == "oracle":
+        if spec.target in ORACLE_TARGETS:
             raise BenchError(
-                "the oracle policy cannot be served: it reads the privileged simulator state "
-                "of the env instance it is built for, which a policy server does not have; "
-                "run it in-process (mikasa-bench run --policy oracle)"
+                f"the {spec.target} policy cannot be served: it reads the privileged simulator "
+                "state of the env instance it is built for, which a policy server does not "
+                f"have; run it in-process (mikasa-bench run --policy {spec.target})"
             )
         if is_remote_target(spec.target):
             raise BenchError(f"cannot serve a remote policy ({spec.target}); serve its source")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -12,7 +13,7 @@ import numpy as np
 class Policy(Protocol):
     """What a rollout needs from a policy."""
 
-    def reset(self) -> None: ...
+    def reset(self) -> None: ...  # or reset(seed=None): then it receives the episode seed
 
     def forward(self, obs: Any) -> Any: ...
 
@@ -41,10 +42,23 @@ class Rollout:
     episode_return: float
 
 
+def reset_with_seed(policy: Policy, seed: int) -> None:
+    """``policy.reset(seed=seed)`` where ``reset`` takes a seed (e.g. a memoryless oracle,
+    whose guesses it seeds), else ``policy.reset()``."""
+    params = inspect.signature(policy.reset).parameters
+    if "seed" in params:
+        policy.reset(seed=seed)  # type: ignore[call-arg]
+    else:
+        policy.reset()
+
+
 def rollout(env: gym.Env, policy: Policy, seed: int, stop_on_success: bool = False) -> Rollout:
-    """Reset ``env`` with ``seed`` and step ``policy`` until truncation (or first success)."""
+    """Reset ``env`` with ``seed`` and step ``policy`` until truncation (or first success).
+
+    The policy is reset after the env, with the episode seed if its ``reset`` takes one.
+    """
     obs, _ = env.reset(seed=seed)
-    policy.reset()
+    reset_with_seed(policy, seed)
     success, steps, total = False, 0, 0.0
     while True:
         obs, reward, terminated, truncated, info = env.step(policy.forward(obs))

@@ -28,7 +28,7 @@ import numpy as np
 from transforms3d.quaternions import qmult, quat2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 Actions = Generator[np.ndarray, None, bool]
 
@@ -146,13 +146,18 @@ class BatteriesCheckerOracle(ScriptedOracle):
             elif stage == base.STAGE_CONFIRM:
                 yield from self._press_button()
             else:
-                unchecked = np.flatnonzero(~base.checked_mask[0, : base.active_battery_count].cpu().numpy())
-                if len(unchecked) == 0:
+                k = self._next_battery()
+                if k is None:
                     yield hold(GRIP_CLOSED)
                     continue
-                k = int(unchecked[0])
                 if (yield from self._pick(k, PREOPEN_TRAY)):
                     yield from self._insert(k)
+
+    def _next_battery(self) -> int | None:
+        """The battery to check next: the first unchecked one (None when all are)."""
+        base = self.base
+        unchecked = np.flatnonzero(~base.checked_mask[0, : base.active_battery_count].cpu().numpy())
+        return int(unchecked[0]) if len(unchecked) else None
 
     # -------------------------------------------------------------- primitives
     def _orientation(self, xy: np.ndarray) -> np.ndarray:
@@ -273,7 +278,33 @@ class BatteriesCheckerOracle(ScriptedOracle):
         return True
 
 
+class MemorylessBatteriesCheckerOracle(Memoryless, BatteriesCheckerOracle):
+    """The BatteriesChecker oracle without memory: the lamp readings (``working_seen``) are
+    wiped every step, and it never reads the checklist (``checked_mask``, which no camera
+    shows: a checked battery stands in its slot like an unchecked one).
+
+    Each check cycle (pick, insert, Hard: return, press) takes a battery drawn uniformly
+    from the active ones, a fresh draw per cycle from the episode's stream (the view before
+    every cycle is the same, so a stable guess would check one battery forever); the
+    episode succeeds once every battery has come up. Chance (`mikasa_bench.chance`): the
+    probability that the cycles fitting in the horizon draw every battery. Kept: the
+    motor program within a cycle and the env's stage machine (its feedback on the last
+    insert, return or press), neither of which says which batteries are done.
+    """
+
+    def forget(self) -> None:
+        """Wipe the lamp readings."""
+        self.working_seen = set()
+
+    def _next_battery(self) -> int | None:
+        return int(self.draws.integers(int(self.base.active_battery_count)))
+
+
 ORACLES: dict[str, type] = {
     "batteries_checker_easy": BatteriesCheckerOracle,
     "batteries_checker_hard": BatteriesCheckerOracle,
+}
+MEMORYLESS_ORACLES: dict[str, type] = {
+    "batteries_checker_easy": MemorylessBatteriesCheckerOracle,
+    "batteries_checker_hard": MemorylessBatteriesCheckerOracle,
 }

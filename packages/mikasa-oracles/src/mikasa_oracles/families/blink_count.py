@@ -16,7 +16,7 @@ import numpy as np
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 # TCP heights: parked / travelling above the caps, pushing (the press registers at
@@ -78,4 +78,29 @@ class BlinkCountOracle(ScriptedOracle):
         return move_towards(tcp_pose, goal, self.hold_rotation, self.gain, GRIPPER_CLOSED)
 
 
+class MemorylessBlinkCountOracle(Memoryless, BlinkCountOracle):
+    """The blink-count oracle without memory: the blink count (and whether the lamp was lit
+    a frame ago) is wiped every step, so no blink is ever counted.
+
+    When the phase lamp shows green (visible now) it guesses the count uniformly among the
+    variant's counts (``BLINK_COUNT_RANGE``, a fixed rule of the task), the same guess at
+    every step, and presses that many times: chance is 1 / (number of counts). Kept: its
+    own presses so far, read from the env's press latch (motion progress, not the answer)
+    and the hold orientation.
+    """
+
+    def forget(self) -> None:
+        """Wipe the count and the lamp history."""
+        self.blinks_seen = 0
+        self.lamp_was_lit = False
+        self.ready_seen = False
+
+    def _watch_lamps(self) -> None:
+        super()._watch_lamps()  # this frame alone: at most one "blink", the phase lamp now
+        if self.ready_seen:
+            lo, hi = self.base.BLINK_COUNT_RANGE
+            self.blinks_seen = lo + self.guess(hi - lo + 1)
+
+
 ORACLES: dict[str, type] = {"blink_count_button_press": BlinkCountOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {"blink_count_button_press": MemorylessBlinkCountOracle}

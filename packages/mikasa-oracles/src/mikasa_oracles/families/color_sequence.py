@@ -19,6 +19,7 @@ from mikasa_envs.building_blocks.buttons import CONFIRM_LIFT
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards
+from mikasa_oracles.scripted import Memoryless
 
 GRIPPER_CLOSED = -1.0
 # Hidden cubes are parked at z = 1000; anything below this height is on the table.
@@ -176,6 +177,36 @@ class ColorSequenceOracle:
         return np.array([*aim, PRESS_Z])
 
 
+class MemorylessColorSequenceOracle(Memoryless, ColorSequenceOracle):
+    """The colour-sequence oracle without memory: the cubes seen in the cue (and the plan
+    made from them) are wiped every step.
+
+    In the action phase all nine cubes stand on the arc and none shows whether it was cued,
+    so it guesses L of them (L = ``SEQUENCE_LENGTH``, named by the task; for Seq/Chain in
+    a guessed order), the same guess at every step: chance is 1 / C(9, L) for Bunch and
+    1 / P(9, L) for Seq and Chain. Bunch visits its guess in the shortest tour from the
+    park point (a fixed start, so the order does not change as the hand moves). Kept: the
+    env's touch and press latches (its own progress), the press start, the orientation.
+    """
+
+    def forget(self) -> None:
+        """Wipe the cue memory and the plan."""
+        self.seen_in_cue = []
+        self.plan = None
+
+    def _make_plan(self, tcp: np.ndarray, cubes: np.ndarray, button: np.ndarray) -> list[int]:
+        if not self.seen_in_cue:  # the action phase: nothing seen this frame, guess
+            on_table = np.flatnonzero(cubes[:, 2] < VISIBLE_BELOW_Z)
+            length = min(int(self.base.SEQUENCE_LENGTH), len(on_table))
+            picks = self.guess_rng(len(on_table), length).choice(on_table, length, replace=False)
+            self.seen_in_cue = [int(k) for k in picks]
+            tcp = self.park_point
+        return super()._make_plan(tcp, cubes, button)
+
+
 ORACLES: dict[str, type] = {
     family: ColorSequenceOracle for family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors")
+}
+MEMORYLESS_ORACLES: dict[str, type] = {
+    family: MemorylessColorSequenceOracle for family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors")
 }

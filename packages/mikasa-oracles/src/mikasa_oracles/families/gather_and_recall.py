@@ -17,7 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 from mikasa_oracles.waypoints import (
     GRIPPER_CLOSED,
     Waypoint,
@@ -140,4 +140,39 @@ class GatherAndRecallOracle(ScriptedOracle):
         return self.follower.action(tcp_pose, idle_gripper=GRIPPER_CLOSED)
 
 
+class MemorylessGatherAndRecallOracle(Memoryless, GatherAndRecallOracle):
+    """The GatherAndRecall oracle without memory: the flash colour is wiped every step.
+
+    It gathers the cubes as usual. The button to press is decided anew at every step: the
+    colour the lamp shows now if it is lit, else a guess among the three buttons (the same
+    at every step); if that changes while it is on its way to press, it turns to the new
+    button. Chance is 1/3. (In GatherAndRecall1 the flash starts as the only cube lands,
+    so it may still be lit when the press is planned: that variant can beat chance.) Kept:
+    the waypoint queue of the transfers (motion).
+    """
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; ``seed`` seeds the guess."""
+        self.press_button: int | None = None
+        super().reset(seed)
+
+    def forget(self) -> None:
+        """Wipe the flash colour."""
+        self.flash_seen = None
+
+    def _watch_lamp(self) -> None:
+        super()._watch_lamp()  # the colour the lamp shows in this frame, if any
+        if self.flash_seen is None:
+            self.flash_seen = self.guess(len(self.base.buttons))
+        if self.pressing and self.flash_seen != self.press_button:
+            # Decided otherwise from this frame: drop the press on its way, press that one.
+            self.follower.reset()
+            self.pressing = False
+
+    def _plan_press(self) -> None:
+        self.press_button = self.flash_seen
+        super()._plan_press()
+
+
 ORACLES: dict[str, type] = {"gather_and_recall": GatherAndRecallOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {"gather_and_recall": MemorylessGatherAndRecallOracle}

@@ -18,7 +18,7 @@ import numpy as np
 from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards, tilted
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 DOWN_QUAT = np.array([0.0, 1.0, 0.0, 0.0])
 DOWN_ROTATION = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])  # TCP pointing down
@@ -508,4 +508,48 @@ class InterceptOracle(BallChaser):
         return track(tcp, np.array([*tcp[:2], self.HOVER_Z]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))
 
 
+class GuessedMotionObserver(BallObserver):
+    """A `BallObserver` that keeps no frames but the current one and answers a fixed
+    guessed velocity (one frame shows no motion)."""
+
+    def __init__(self, guessed_velocity: np.ndarray) -> None:
+        super().__init__()
+        self.guessed_velocity = guessed_velocity
+
+    def velocity(self) -> np.ndarray:
+        """The guess (xy displacement per step)."""
+        return self.guessed_velocity
+
+
+class MemorylessBallChaserMixin(Memoryless):
+    """The Intercept oracles without memory: the ball's past positions are wiped every
+    step, so its velocity cannot be measured (a single frame shows no motion).
+
+    It uses a velocity drawn from the task's launch range (vx ~ U[0, ``VX_MAX``), vy ~
+    U[``VELOCITY_RANGE``), per control step), the same at every step, with the ball's
+    position in the current frame. Chance is 0 (a continuous velocity, never seen); a
+    success means the ball can be met by reacting to where it is now, i.e. without memory.
+    Kept: the plan and stage of the approach (wait point, merge, strike, lift: motion).
+    """
+
+    def forget(self) -> None:
+        """Wipe the ball's track: only this frame's position will be seen."""
+        base = self.base
+        rng = self.guess_rng(2)
+        launch = np.array([rng.uniform(0.0, base.VX_MAX), rng.uniform(*base.VELOCITY_RANGE)])
+        self.ball = GuessedMotionObserver(launch * float(base.control_timestep))
+
+
+class MemorylessInterceptOracle(MemorylessBallChaserMixin, InterceptOracle):
+    """`InterceptOracle` without memory (`MemorylessBallChaserMixin`)."""
+
+
+class MemorylessInterceptGrabOracle(MemorylessBallChaserMixin, InterceptGrabOracle):
+    """`InterceptGrabOracle` without memory (`MemorylessBallChaserMixin`)."""
+
+
 ORACLES: dict[str, type] = {"intercept": InterceptOracle, "intercept_grab": InterceptGrabOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {
+    "intercept": MemorylessInterceptOracle,
+    "intercept_grab": MemorylessInterceptGrabOracle,
+}

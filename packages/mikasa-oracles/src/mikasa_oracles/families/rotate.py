@@ -29,7 +29,7 @@ from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 GRIPPER_OPEN = 1.0
@@ -380,4 +380,42 @@ class GraspTwistRotateOracle(RotateOracleBase):
         return hold(GRIPPER_CLOSED)
 
 
+class MemorylessRotateMixin(Memoryless):
+    """The Rotate oracles without memory: the tracked turn (the start heading and the turn
+    added up since) is wiped every step, and so is the start centre.
+
+    The target is in the instruction and the peg's heading in view, but once the peg moves
+    nothing shows where it started; so the turn so far is measured from a guessed start
+    heading, drawn uniformly from [0, 2π) and the same at every step (at the first frame
+    the peg's heading is its start, but the next frame has forgotten that). The start
+    centre (RotateStrict: keep the peg in place) is where the peg is now. Chance: the
+    ±``angle_threshold`` success window over a uniform start heading, 0.1/π ≈ 3.2 %.
+    Kept: the last frame's heading (the turn rate, i.e. motion) and the stage machine.
+    """
+
+    def forget(self) -> None:
+        """Nothing to wipe here: ``_observe`` recomputes the turn from the guess each step."""
+
+    def _observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        tcp, peg, qpos = super()._observe()  # target from the instruction, the turn rate
+        guessed_start = 2 * math.pi * float(self.guess_rng(1).random())
+        # The turn so far as the guess has it, taken so that the turn still to go is the
+        # shorter way round to the guessed goal heading.
+        self.turned = self.target - wrap(self.target - (heading_of(peg[3:]) - guessed_start))
+        self.start_centre = peg[:2].copy()
+        return tcp, peg, qpos
+
+
+class MemorylessPushRotateOracle(MemorylessRotateMixin, PushRotateOracle):
+    """`PushRotateOracle` without memory (`MemorylessRotateMixin`)."""
+
+
+class MemorylessGraspTwistRotateOracle(MemorylessRotateMixin, GraspTwistRotateOracle):
+    """`GraspTwistRotateOracle` without memory (`MemorylessRotateMixin`)."""
+
+
 ORACLES: dict[str, type] = {"rotate_lenient": PushRotateOracle, "rotate_strict": GraspTwistRotateOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {
+    "rotate_lenient": MemorylessPushRotateOracle,
+    "rotate_strict": MemorylessGraspTwistRotateOracle,
+}

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from mikasa_oracles.controller import hold, move_towards, tilted
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 # Hidden objects are parked at z = 1000; anything below this height is on the table.
 VISIBLE_BELOW_Z = 1.0
@@ -79,14 +79,34 @@ class SelectionOracle(ScriptedOracle):
         return move_towards(tcp_pose, goal, tilted(self.start_orientation, tilt), self.gain)
 
 
-ORACLES: dict[str, type] = {
-    family: SelectionOracle
-    for family in (
-        "remember_color",
-        "remember_shape",
-        "remember_shape_and_color",
-        "find_imposter_color",
-        "find_imposter_shape",
-        "find_imposter_shape_and_color",
-    )
-}
+class MemorylessSelectionOracle(Memoryless, SelectionOracle):
+    """The selection oracle without memory: ``seen_in_cue`` is wiped every step.
+
+    In the action phase all N candidates stand on the table and nothing shows which was
+    shown (or missing) in the cue, so it guesses one of the objects on the table now
+    (stable: it depends on the episode seed and N only) and touches it: chance is 1/N.
+    """
+
+    def forget(self) -> None:
+        """Wipe the cue memory; the current frame's cue (if any) is noted again in forward."""
+        self.seen_in_cue = set()
+
+    def _remembered_target(self) -> int | None:
+        target = super()._remembered_target()  # from this frame alone: None in the action phase
+        if target is not None:
+            return target
+        positions = self.base.object_positions()[0].cpu().numpy()
+        on_table = np.flatnonzero(positions[:, 2] < VISIBLE_BELOW_Z)
+        return int(on_table[self.guess(len(on_table))]) if len(on_table) else None
+
+
+FAMILIES = (
+    "remember_color",
+    "remember_shape",
+    "remember_shape_and_color",
+    "find_imposter_color",
+    "find_imposter_shape",
+    "find_imposter_shape_and_color",
+)
+ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, SelectionOracle)
+MEMORYLESS_ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, MemorylessSelectionOracle)

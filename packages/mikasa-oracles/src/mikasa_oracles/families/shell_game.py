@@ -23,7 +23,7 @@ from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 # Hidden objects are parked 1000 m up; anything below this height is in view.
 VISIBLE_BELOW_Z = 1.0
@@ -261,6 +261,71 @@ class PickMugOracle(ShellGameOracle):
         return int(np.argmin(np.linalg.norm(positions - self.tracker.positions[self.target], axis=1)))
 
 
+class MemorylessShellGameMixin(Memoryless):
+    """The shell-game oracles without memory.
+
+    Wiped every step: the balls seen in the cue, the mug tracker (so a shuffle cannot be
+    followed), which mug appeared over which ball, and the chosen target. Kept: the motion
+    stages of Push / Pick and the start orientation. A ball at table height counts as seen
+    only while the mugs are out of view: once they stand on the table it is under one of
+    them, and a camera does not see it (its privileged pose is ignored).
+
+    In the action phase it guesses one of the three mugs on the table, numbered by slot
+    (left to right along y, which a push along +x or a lift does not change), so the guess
+    stays on the same mug. The colour-lamp families add the task's fixed rule: the ball of
+    the lamp's colour stood at slot red 0 / green 1 / blue 2 in the cue, so without a
+    shuffle the lamp alone names the mug (a known leak of ShellGameColorLampTouch, kept
+    upstream); after a shuffle that slot holds the right mug only by chance.
+    """
+
+    def forget(self) -> None:
+        """Wipe the cue, the tracking and the target."""
+        self.tracker = MugTracker()
+        self.balls_seen = {}
+        self.mug_of_ball = {}
+        self.target = None
+
+    def _observe(self) -> None:
+        mugs = self.base.mug_positions()[0].cpu().numpy()
+        if np.all(mugs[:, 2] < VISIBLE_BELOW_Z):
+            self.tracker.update(mugs)  # the mugs are in view: any ball is under one of them
+            return
+        super()._observe()
+
+    def _choose_target(self) -> int | None:
+        target = super()._choose_target()  # from this frame alone: None in the action phase
+        if target is None and self.tracker.positions is not None:
+            by_slot = np.argsort(self.tracker.positions[:, 1], kind="stable")
+            target = int(by_slot[self._slot_guess()])
+        return target
+
+    def _slot_guess(self) -> int:
+        return self.guess(len(self.tracker.positions))
+
+
+class MemorylessTouchMugOracle(MemorylessShellGameMixin, TouchMugOracle):
+    """`TouchMugOracle` without memory (`MemorylessShellGameMixin`)."""
+
+
+class MemorylessPushMugOracle(MemorylessShellGameMixin, PushMugOracle):
+    """`PushMugOracle` without memory (`MemorylessShellGameMixin`)."""
+
+
+class MemorylessPickMugOracle(MemorylessShellGameMixin, PickMugOracle):
+    """`PickMugOracle` without memory (`MemorylessShellGameMixin`)."""
+
+
+class MemorylessColorLampTouchOracle(MemorylessShellGameMixin, ColorLampTouchOracle):
+    """`ColorLampTouchOracle` without memory: the lamp's colour (shown now) and the fixed
+    cue slot of that colour's ball pick the slot (`MemorylessShellGameMixin`)."""
+
+    def _slot_guess(self) -> int:
+        colour = self._lamp_colour()
+        if colour is None:
+            return super()._slot_guess()
+        return [ball.name for ball in self.base.balls].index(f"ball_{colour}")
+
+
 ORACLES: dict[str, type] = {
     "shell_game_touch": TouchMugOracle,
     "shell_game_push": PushMugOracle,
@@ -268,4 +333,12 @@ ORACLES: dict[str, type] = {
     "shell_game_shuffle_touch": TouchMugOracle,
     "shell_game_color_lamp_touch": ColorLampTouchOracle,
     "shell_game_shuffle_color_lamp_touch": ColorLampTouchOracle,
+}
+MEMORYLESS_ORACLES: dict[str, type] = {
+    "shell_game_touch": MemorylessTouchMugOracle,
+    "shell_game_push": MemorylessPushMugOracle,
+    "shell_game_pick": MemorylessPickMugOracle,
+    "shell_game_shuffle_touch": MemorylessTouchMugOracle,
+    "shell_game_color_lamp_touch": MemorylessColorLampTouchOracle,
+    "shell_game_shuffle_color_lamp_touch": MemorylessColorLampTouchOracle,
 }

@@ -22,7 +22,7 @@ import numpy as np
 from transforms3d.euler import euler2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
 DOWN = np.array([0.0, 1.0, 0.0, 0.0])  # TCP orientation (w, x, y, z) pointing straight down
@@ -127,4 +127,25 @@ class TakeItBackOracle(ScriptedOracle):
         return action
 
 
+class MemorylessTakeItBackOracle(Memoryless, TakeItBackOracle):
+    """The TakeItBack oracle without memory: the start spot (the cube's first-frame
+    position) is wiped every step, and no frame after the first shows it.
+
+    It pushes the cube onto the target as usual (the target is in view), and brings it back
+    to a guessed start: the centre of one of the three start rows of the task's fixed
+    layout (x ∈ [−0.05, 0.05), y = 0.1·j + [0, 0.05), j ∈ {−1, 0, 1}), the same row at
+    every step. A row centre lies within the 0.08 success radius of every start in its row,
+    so chance is about 1/3 (`mikasa_bench.chance` gives the exact figure). Kept: whether
+    the paddle is in contact (motion); the stage follows the target's colour (in view).
+    """
+
+    def forget(self) -> None:
+        """Wipe the start spot: the guessed row stands in for it."""
+        base = self.base
+        row = self.guess(3) - 1
+        x_lo, x_hi = base.START_X
+        self.start_xy = np.array([(x_lo + x_hi) / 2, base.START_Y_STEP * row + base.START_Y_JITTER / 2])
+
+
 ORACLES: dict[str, type] = {"take_it_back": TakeItBackOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {"take_it_back": MemorylessTakeItBackOracle}

@@ -13,7 +13,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 from mikasa_oracles.waypoints import GRIPPER_CLOSED, Waypoint, WaypointFollower, shown_bulb
 
 
@@ -46,16 +46,17 @@ class TimedTransferOracle(ScriptedOracle):
         # D is the number in the instruction; aim at the window's centre, signal + D.
         return self.signal_seen_at + int(self.base.DELAY_STEPS) - self.DESCENT_STEPS
 
+    def _time_to_descend(self) -> bool:
+        """Whether to leave the hover point now (asked once per step while hovering)."""
+        release = self._release_step()
+        return release is not None and int(self.base.elapsed_steps[0]) >= release
+
     def _plan(self) -> None:
         base = self.base
         cube = base.cube_position()[0].cpu().numpy().astype(np.float64)
         red = base.red_disc_center[0].cpu().numpy().astype(np.float64)
         above_cube = np.array([cube[0], cube[1], self.APPROACH_Z])
         at_cube = cube.copy()
-
-        def time_to_descend() -> bool:
-            release = self._release_step()
-            return release is not None and int(base.elapsed_steps[0]) >= release
 
         self.follower.add(
             Waypoint(above_cube, 1.0, tol=0.01, max_steps=40),
@@ -64,7 +65,7 @@ class TimedTransferOracle(ScriptedOracle):
             Waypoint(np.array([cube[0], cube[1], self.CARRY_Z]), GRIPPER_CLOSED, tol=0.02, max_steps=30),
             Waypoint(np.array([red[0], red[1], self.CARRY_Z]), GRIPPER_CLOSED, tol=0.01, max_steps=40),
             # Hover until two steps before signal + D (no step cap: the wait may be 1000 steps).
-            Waypoint(np.array([red[0], red[1], self.HOVER_Z]), GRIPPER_CLOSED, tol=1.0, max_steps=10**9, until=time_to_descend),
+            Waypoint(np.array([red[0], red[1], self.HOVER_Z]), GRIPPER_CLOSED, tol=1.0, max_steps=10**9, until=self._time_to_descend),
             Waypoint(np.array([red[0], red[1], self.PLACE_Z]), GRIPPER_CLOSED, tol=0.0, max_steps=10**9),
         )
 
@@ -80,4 +81,26 @@ class TimedTransferOracle(ScriptedOracle):
         return self.follower.action(tcp_pose)
 
 
+class MemorylessTimedTransferOracle(Memoryless, TimedTransferOracle):
+    """The TimedTransfer oracle without memory: the step the lamp turned green is wiped
+    every step, and it reads no clock (the step count is exactly what the task asks to
+    remember; the lamp stays green, so no frame shows how long ago it turned).
+
+    It carries the cube over the red disc as usual; while hovering there it descends with
+    probability ``1 / DELAY_STEPS`` at each step (a fresh draw from the episode's stream),
+    the only timing a policy without a clock has. Chance (`mikasa_bench.chance`): the
+    window's share of the steps up to its end, an upper bound on such a constant-hazard
+    descent. Kept: the waypoint queue (motion).
+    """
+
+    def forget(self) -> None:
+        """Wipe the signal time."""
+        self.signal_seen_at = None
+
+    def _time_to_descend(self) -> bool:
+        green = shown_bulb(self.base.lamp) == "green"
+        return green and bool(self.draws.random() < 1.0 / float(self.base.DELAY_STEPS))
+
+
 ORACLES: dict[str, type] = {"timed_transfer": TimedTransferOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {"timed_transfer": MemorylessTimedTransferOracle}

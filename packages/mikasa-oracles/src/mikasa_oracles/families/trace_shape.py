@@ -16,18 +16,21 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
+import torch
 from mikasa_envs.tasks._trace_shape import (
     BULB_GREEN,
     BULB_RED,
     CHECKPOINT_STRIDE,
     NUM_CHECKPOINTS,
     NUM_WAYPOINTS,
+    checkpoints_of,
+    shape_waypoints,
 )
 from transforms3d.axangles import axangle2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
-from mikasa_oracles.scripted import ScriptedOracle
+from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
 # Hidden objects are parked at z = 1000; anything below this height is in view.
@@ -59,6 +62,8 @@ Action = np.ndarray
 class TraceShapeOracle(ScriptedOracle):
     """Scripted solver of TraceShape / TraceShapeSeq; one instance per env, ``num_envs == 1``."""
 
+    # Passes over an element's checkpoints (repeating those the env has not latched).
+    PASSES = MAX_PASSES
 
     def reset(self) -> None:
         """Forget the previous demonstration and restart the script."""
@@ -161,7 +166,7 @@ class TraceShapeOracle(ScriptedOracle):
         cube; repeat the checkpoints the env has not latched, up to MAX_PASSES times."""
         todo = list(range(NUM_CHECKPOINTS))
         regrasps = 0
-        for _ in range(MAX_PASSES):
+        for _ in range(self.PASSES):
             for index in [*todo, 0]:
                 if self._grasp_lost() and regrasps < MAX_REGRASPS:
                     regrasps += 1
@@ -198,4 +203,53 @@ class TraceShapeOracle(ScriptedOracle):
         yield from self._move(lambda: np.array([*press_xy, PRESS_Z]), GRIPPER_CLOSED, 0.005, 20, leaning)
 
 
+class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
+    """The trace oracle without memory: the recorded demonstration is wiped every step, and
+    the env's checkpoint and closure latches (hidden: they would say which guessed points
+    missed) are not read.
+
+    When the lamp turns green the red cube is gone, so it traces a guessed contour: about
+    the shape centre, which the lamp shows (the lamp stands at centre + ``LAMP_OFFSET``, a
+    fixed rule of the task), a shape from the variant's set (TraceShapeSeq: the shapes in
+    ``task_cue``, part of the VLA observation), a size drawn from ``SIZE_RANGE`` and a
+    rotation from [0, 2π), all fixed per episode; it goes round each contour ``PASSES``
+    times, blind. Chance is 0 (continuous size and rotation); any success is a leak (a
+    circle's rotation does not matter, and one of middle size passes within the 3.5 cm
+    checkpoint radius of every circle in the size range). Kept: the script's progress.
+    """
+
+    PASSES = 2
+
+    def forget(self) -> None:
+        """Wipe the recorded demonstration."""
+        self.recorded_path = []
+
+    def demonstrated_checkpoints(self) -> list[np.ndarray]:
+        """The guessed contours' (12, 2) checkpoints (see the class docstring)."""
+        base = self.base
+        cue = getattr(base, "task_cue", None)
+        if cue is not None:
+            shapes = [int(k) for k in cue[0].cpu().numpy() if k >= 0]
+        else:
+            shapes = [int(base.SHAPE_SET[self.guess(len(base.SHAPE_SET))])]
+        rng = self.guess_rng(len(shapes), 1)
+        sizes = rng.uniform(*base.SIZE_RANGE, size=len(shapes))
+        rotations = rng.uniform(0.0, 2 * np.pi, size=len(shapes))
+        centre = base.lamp.position[0, :2].cpu().numpy().astype(np.float64) - np.asarray(base.LAMP_OFFSET)
+        waypoints = shape_waypoints(
+            torch.as_tensor(shapes, dtype=torch.long),
+            torch.as_tensor(np.tile(centre, (len(shapes), 1)), dtype=torch.float32),
+            torch.as_tensor(sizes, dtype=torch.float32),
+            torch.as_tensor(rotations, dtype=torch.float32),
+        )
+        return [c.astype(np.float64) for c in checkpoints_of(waypoints).numpy()]
+
+    def _element_closed(self, element: int) -> bool:
+        return False
+
+    def _unvisited(self, element: int) -> list[int]:
+        return list(range(NUM_CHECKPOINTS))
+
+
 ORACLES: dict[str, type] = {"trace_shape": TraceShapeOracle, "trace_shape_seq": TraceShapeOracle}
+MEMORYLESS_ORACLES: dict[str, type] = {"trace_shape": MemorylessTraceShapeOracle, "trace_shape_seq": MemorylessTraceShapeOracle}

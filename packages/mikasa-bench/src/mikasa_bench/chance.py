@@ -1,0 +1,223 @@
+"""Chance success rate per task: what a policy without memory can get by guessing.
+
+The validity check (issue 16 §1, ``mikasa-bench validity``) compares the memoryless oracle
+and the random policy with this figure: a task where either does significantly better
+than chance shows its answer without memory (a leak).
+
+* Tasks with a discrete answer: the success of a uniform guess among the candidates the
+  agent sees when it must act (1/N objects, mugs, buttons or counts; 1/C(9, L) colour sets,
+  1/P(9, L) colour sequences). For TakeItBack the candidates are the three start rows.
+* Tasks without a discrete answer, each justified in its reason: Intercept*, TraceShape*
+  (a continuous answer that is never seen without memory: chance 0, any success is a
+  leak), Rotate* (a continuous start heading: the success window's share of it),
+  TimedTransfer* (a time: the best a policy without a clock gets by descending with a
+  constant probability per step), BatteriesChecker* (a checklist: the chance that
+  uniformly drawn check cycles cover every battery within the horizon).
+
+The variant parameters are the envs' class constants (``BLINK_COUNT_RANGE``,
+``SEQUENCE_LENGTH``, ...), copied here so that this module does not import the simulator;
+``tests/test_validity.py`` checks them against the env classes. Plain data otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+__all__ = ["Chance", "task_chance", "chance_table"]
+
+
+@dataclass(frozen=True)
+class Chance:
+    """A task's chance success rate and why (one line)."""
+
+    rate: float
+    reason: str
+
+
+# --- variant parameters (class constants of the envs; checked by tests/test_validity.py)
+# Bunch/Seq/ChainOfColors: cubes on the arc.
+NUM_COLORS = 9
+# BlinkCountButtonPress variant -> BLINK_COUNT_RANGE (inclusive).
+BLINK_COUNT_RANGES: dict[str, tuple[int, int]] = {
+    "Easy": (1, 3),
+    "Medium": (1, 5),
+    "Hard": (1, 7),
+    "Easy-Long": (1, 10),
+    "Medium-Long": (10, 20),
+    "Hard-Long": (20, 30),
+}
+# TimedTransfer variant -> DELAY_STEPS; WINDOW_TOLERANCE; SIGNAL_STEP_RANGE (inclusive).
+TIMED_TRANSFER_DELAYS: dict[str, int] = {
+    "Easy": 100,
+    "Medium": 150,
+    "Hard": 200,
+    "Easy-Long": 300,
+    "Medium-Long": 500,
+    "Hard-Long": 1000,
+}
+TIMED_TRANSFER_TOLERANCE = 0.05
+TIMED_TRANSFER_SIGNAL_STEPS = (1, 3)
+# Rotate*: angle_threshold (rad, the env's default).
+ROTATE_ANGLE_THRESHOLD = 0.1
+# TakeItBack: START_X, START_Y_STEP, START_Y_JITTER, GOAL_RADIUS (the success radius).
+TAKE_IT_BACK_START_X = (-0.05, 0.05)
+TAKE_IT_BACK_ROW_STEP = 0.1
+TAKE_IT_BACK_ROW_JITTER = 0.05
+TAKE_IT_BACK_RADIUS = 0.08
+# BatteriesChecker: env steps of one check cycle (pick, insert, Hard: return, press) of
+# the oracle, measured (Easy-3 / Easy-6: 247-248 / 502-504 steps for 3 / 6 cycles, Hard-3:
+# 427-430 for 3; the memoryless oracle's cycles took 79-88 steps on Easy-3).
+BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_checker_hard": 143}
+
+_SHELL_GAMES = (
+    "shell_game_touch",
+    "shell_game_push",
+    "shell_game_pick",
+    "shell_game_shuffle_touch",
+    "shell_game_color_lamp_touch",
+    "shell_game_shuffle_color_lamp_touch",
+)
+_SELECTION = (
+    "remember_color",
+    "remember_shape",
+    "remember_shape_and_color",
+    "find_imposter_color",
+    "find_imposter_shape",
+    "find_imposter_shape_and_color",
+)
+
+
+def _variant(env_id: str, family_prefix: str) -> str:
+    """``BlinkCountButtonPressEasy-Long-VLA-v0`` -> ``Easy-Long`` (prefix ``BlinkCountButtonPress``)."""
+    return env_id[len(family_prefix) :].removesuffix("-VLA-v0")
+
+
+def _selection_candidates(env_id: str) -> int:
+    """N objects on the table in the action phase, from the id (``…3x2…`` -> 6, ``…9…`` -> 9)."""
+    m = re.search(r"(\d+)x(\d+)", env_id)
+    if m:
+        return int(m.group(1)) * int(m.group(2))
+    m = re.search(r"(?:Color|Shape)(\d+)", env_id)
+    if m is None:
+        raise ValueError(f"cannot tell the number of candidates of {env_id!r}")
+    return int(m.group(1))
+
+
+def _sequence_length(env_id: str) -> int:
+    m = re.search(r"Colors(\d+)", env_id)
+    if m is None:
+        raise ValueError(f"cannot tell the sequence length of {env_id!r}")
+    return int(m.group(1))
+
+
+def take_it_back_chance() -> float:
+    """P(a guessed row centre lies within the success radius of the true start).
+
+    The start is x ~ U[START_X), y = 0.1·j + U[0, 0.05) with j ~ U{−1, 0, 1}; the guess is
+    (centre of START_X, 0.1·j' + 0.025) with j' uniform. The guessed row always succeeds
+    (its corners are 0.056 away); a neighbouring row only where its near edge comes within
+    the radius (a midpoint integral over the row's y jitter).
+    """
+    x_lo, x_hi = TAKE_IT_BACK_START_X
+    width, jitter, r = x_hi - x_lo, TAKE_IT_BACK_ROW_JITTER, TAKE_IT_BACK_RADIUS
+    near = TAKE_IT_BACK_ROW_STEP - jitter / 2  # y gap from a row centre to the next row's near edge
+    n = 20_000
+    share = 0.0
+    for i in range(n):
+        dy = near + (i + 0.5) / n * jitter
+        if dy < r:
+            share += min(2 * math.sqrt(r * r - dy * dy), width) / width
+    neighbour = share / n
+    mean_neighbours = 4 / 3  # rows −1 and 1 have one neighbour, row 0 two
+    return (1 + mean_neighbours * neighbour) / 3
+
+
+def timed_transfer_chance(delay: int) -> tuple[float, int, int]:
+    """(chance, window width, steps up to the window's end) for a delay of ``delay`` steps."""
+    lo = int((1 - TIMED_TRANSFER_TOLERANCE) * delay)
+    hi = int((1 + TIMED_TRANSFER_TOLERANCE) * delay)
+    signal = sum(TIMED_TRANSFER_SIGNAL_STEPS) / 2
+    width = hi - lo + 1
+    end = signal + hi + 1
+    return width / end, width, int(end)
+
+
+def coupon_chance(n: int, draws: int) -> float:
+    """P(``draws`` uniform picks among ``n`` items pick every item) (inclusion-exclusion)."""
+    return sum((-1) ** j * math.comb(n, j) * ((n - j) / n) ** draws for j in range(n + 1))
+
+
+def task_chance(env_id: str) -> Chance:
+    """The chance success rate of ``env_id`` (a manifest id) and its one-line reason."""
+    from mikasa_envs.manifest import get_task
+
+    task = get_task(env_id)
+    family = task.family
+    if family in _SELECTION:
+        n = _selection_candidates(env_id)
+        which = "find the imposter among" if family.startswith("find") else "the shown one is one of"
+        return Chance(1 / n, f"1/{n}: {which} the {n} objects on the table in the action phase")
+    if family in _SHELL_GAMES:
+        return Chance(1 / 3, "1/3: the ball's mug is one of 3 mugs")
+    if family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors"):
+        length = _sequence_length(env_id)
+        if family == "bunch_of_colors":
+            sets = math.comb(NUM_COLORS, length)
+            return Chance(1 / sets, f"1/C(9,{length}) = 1/{sets}: the shown set of {length} of 9 cubes")
+        orders = math.perm(NUM_COLORS, length)
+        return Chance(1 / orders, f"1/P(9,{length}) = 1/{orders}: the shown sequence of {length} of 9 cubes")
+    if family == "blink_count_button_press":
+        lo, hi = BLINK_COUNT_RANGES[_variant(env_id, "BlinkCountButtonPress")]
+        k = hi - lo + 1
+        return Chance(1 / k, f"1/{k}: the blink count is one of {lo}..{hi}")
+    if family == "gather_and_recall":
+        return Chance(1 / 3, "1/3: the flash colour is one of 3 buttons")
+    if family == "take_it_back":
+        return Chance(
+            take_it_back_chance(),
+            "≈1/3: the start is in one of 3 rows; a guess at a row's centre is within the "
+            "0.08 radius of every start of that row (and of a sliver of a neighbouring row)",
+        )
+    if family in ("rotate_lenient", "rotate_strict"):
+        t = ROTATE_ANGLE_THRESHOLD
+        return Chance(
+            t / math.pi,
+            f"{t}/π: no discrete answer; the unseen start heading is uniform in [0, 2π), and a "
+            f"guess succeeds within ±{t} rad of it",
+        )
+    if family == "timed_transfer":
+        rate, width, end = timed_transfer_chance(TIMED_TRANSFER_DELAYS[_variant(env_id, "TimedTransfer")])
+        return Chance(
+            rate,
+            f"{width}/{end}: no discrete answer (a time); the window's share of the steps up to "
+            f"its end bounds a clockless policy that descends with a constant probability per step",
+        )
+    if family in BATTERY_CYCLE_STEPS:
+        n = int(re.search(r"-(\d+)-VLA", env_id).group(1))  # type: ignore[union-attr]
+        cycles = task.max_episode_steps // BATTERY_CYCLE_STEPS[family]
+        return Chance(
+            coupon_chance(n, cycles),
+            f"no discrete answer (a checklist): {cycles} check cycles fit the horizon; chance that "
+            f"cycles on uniformly drawn batteries cover all {n}",
+        )
+    if family in ("intercept", "intercept_grab"):
+        return Chance(
+            0.0,
+            "0: no discrete answer; the launch velocity is continuous and one frame shows no "
+            "motion, so any success without memory means the ball can be met reactively",
+        )
+    if family in ("trace_shape", "trace_shape_seq"):
+        return Chance(
+            0.0,
+            "0: no discrete answer; the contour's size and rotation are continuous and never "
+            "shown again, so any success without memory is a leak",
+        )
+    raise ValueError(f"no chance rate for {env_id!r} (family {family!r})")
+
+
+def chance_table(env_ids: Iterable[str]) -> dict[str, Chance]:
+    """`task_chance` of every id."""
+    return {env_id: task_chance(env_id) for env_id in env_ids}

@@ -1,0 +1,110 @@
+"""The hand-maintained list of answer leaks (tasks solvable without memory) found so far.
+
+``mikasa-bench validity`` prints it under "Leaks found" in ``docs/VALIDITY.md``. Add an
+entry when the validity table (or anything else) shows a task that a policy without memory
+solves above chance, and update its status when the env is fixed (record the fix in
+``packages/mikasa-envs/DEVIATIONS.md`` and name the row here).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+__all__ = ["Leak", "LEAKS", "LEAK_STATUSES"]
+
+LEAK_STATUSES = ("closed", "open", "kept")
+"""closed: fixed in the envs; open: found, not fixed yet; kept: known and deliberately kept."""
+
+
+@dataclass(frozen=True)
+class Leak:
+    """One leak: where, what a memoryless policy could exploit, the evidence, the fix."""
+
+    tasks: str
+    leak: str
+    evidence: str
+    status: str
+    fix: str = ""
+    reference: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return asdict(self)
+
+
+LEAKS: tuple[Leak, ...] = (
+    Leak(
+        tasks="Remember{Color,Shape,ShapeAndColor}*-Long",
+        leak="success was not gated on the action phase, and the answer stands alone at the "
+        "cue spot during the cue: touching the only object in view succeeded",
+        evidence="a policy that touches whatever is on the table succeeds in the -Long variants "
+        "(no curriculum freeze, 10-100 cue steps)",
+        status="closed",
+        fix="success requires the action phase in every selection family",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #1",
+    ),
+    Leak(
+        tasks="ShellGameTouch, ShellGamePush (hidden mugs)",
+        leak="mugs free-fell during the cue and popped out with a kick; Push episodes succeeded "
+        "without contact",
+        evidence="success without acting on the right mug",
+        status="closed",
+        fix="mugs pinned (pose and zero velocity) during the cue, stood at rest at the first "
+        "action frame",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #13",
+    ),
+    Leak(
+        tasks="ShellGameShuffleTouch-Long (sparse reward)",
+        leak="success was gated on the action phase only in dense reward modes: touching the "
+        "ball's mug mid-shuffle, while it could still be followed, succeeded",
+        evidence="sparse-mode successes during the shuffle",
+        status="closed",
+        fix="success gated on the action phase in every reward mode",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #15",
+    ),
+    Leak(
+        tasks="InterceptSlow",
+        leak="the goal is drawn independently of the launch: a slow, drifting ball passed over "
+        "the target by itself",
+        evidence="zero actions succeeded on seed 4242424242 (step 58), about 1 seed in 50",
+        status="closed",
+        fix="success also requires that a robot link touched the ball",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #23",
+    ),
+    Leak(
+        tasks="ShellGameColorLampTouch",
+        leak="the colour->slot mapping is fixed (red left, green centre, blue right), there is "
+        "no shuffle, and the lamp stays lit in the action phase: the lamp alone names the mug",
+        evidence="the memoryless oracle, which applies the fixed mapping to the lamp it sees "
+        "now, succeeds in every episode",
+        status="kept",
+        fix="none: the spec requires the mapping to match upstream data; the memory-bearing "
+        "variant is ShellGameShuffleColorLampTouch",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Kept (ShellGameColorLampTouch)",
+    ),
+    Leak(
+        tasks="TraceShapeEasy (and the circle episodes of TraceShapeMedium/Hard)",
+        leak="the lamp (and the green cube's start) stand at fixed offsets from the shape "
+        "centre, Easy draws only circles, a circle's rotation does not matter, and the size "
+        "range (R in [0.078, 0.13)) is narrow against the 3.5 cm checkpoint radius: circling "
+        "the centre the lamp shows at a guessed radius, twice, passes every checkpoint and "
+        "the closure",
+        evidence="memoryless oracle (guessed shape, size and rotation about the lamp's centre), "
+        "seeds 4242424242+0..9, state obs: TraceShapeEasy 9/10, TraceShapeMedium 3/10; chance 0",
+        status="open",
+        fix="not fixed yet (e.g. draw the lamp and cube offsets independently of the centre, "
+        "widen the size range or check the demonstrated start point and direction)",
+    ),
+    Leak(
+        tasks="InterceptGrab* (Slow most), Intercept*",
+        leak="the launch velocity is drawn from a narrow range (vx in [0, 0.05), vy in a 0.25 m/s "
+        "band, always towards +y): its prior plus the ball's position in the current frame is "
+        "enough to meet the ball, so the motion never has to be measured across frames",
+        evidence="memoryless oracle (a velocity drawn from the launch range, the current ball "
+        "position each step), seeds 4242424242+0..9, state obs: InterceptGrabSlow 5/10, "
+        "InterceptGrabMedium 1/10, InterceptSlow 1/10; chance 0",
+        status="open",
+        fix="not fixed yet (e.g. a wider range of launch directions and speeds)",
+    ),
+)
