@@ -1,0 +1,547 @@
+"""The units of the LeRobot baseline driver and their records.
+
+One unit = one task's collection, its conversion, one setting's training, or one policy's
+evaluation. Each runs the project's CLI (or ``lerobot_train.py``) as a subprocess under the
+call's time limit, builds its output under a hidden ``.partial`` path (collection and
+conversion: the CLIs' own per-episode / staging-directory protocol), renames it into place
+when complete, and then writes a small JSON record under ``<out>/records/<task>/``: the
+table is built from those records alone. A unit whose record exists and whose outputs later
+units need are there is skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from baseline_common import (
+    DRIVER_CALL,
+    HERE,
+    Deadline,
+    RunResult,
+    TimeUp,
+    UnitFailed,
+    dir_size_mb,
+    display,
+    log,
+    now,
+    read_json,
+    rel,
+    run_until,
+    write_json,
+)
+from baseline_settings import (
+    Setting,
+    dataset_name,
+    flag_diff,
+    make_settings,
+    model_flags,
+    train_flags,
+)
+from mikasa_bench.errors import BenchError
+from mikasa_bench.metrics import wilson_interval
+from mikasa_bench.results import load_run
+
+__all__ = ["Driver", "TRAIN_WRAPPER"]
+
+TRAIN_WRAPPER = HERE / "lerobot_train.py"
+TRAIN_PAUSED = 75  # lerobot_train.EXIT_PAUSED (not imported: the driver needs no lerobot)
+BENCH_INTERRUPTED = 130
+
+
+def _last(run_dir: Path) -> Path:
+    """A lerobot-train run's last checkpoint."""
+    return run_dir / "checkpoints" / "last"
+
+
+def _step_file(run_dir: Path) -> Path:
+    """The step count of a run's last checkpoint (there once the first one is saved)."""
+    return _last(run_dir) / "training_state" / "training_step.json"
+
+
+def _wall_s(calls: Sequence[Mapping[str, Any]]) -> float:
+    """The wall time summed over a unit's calls."""
+    return round(sum(c.get("wall_s", 0) for c in calls), 1)
+
+
+def _rate(calls: Sequence[Mapping[str, Any]]) -> float | None:
+    """Training steps per second over the calls' training loops (start-ups excluded)."""
+    steps = sum(c.get("steps") or 0 for c in calls)
+    loop = sum(c.get("loop_s") or 0.0 for c in calls)
+    return round(steps / loop, 3) if steps and loop > 0 else None
+
+
+def _bench_result(run_dir: Path, task: str) -> dict[str, Any] | None:
+    """``task``'s result in a finished ``mikasa-bench run`` directory, or None."""
+    try:
+        results = load_run(run_dir).results
+    except BenchError:
+        return None
+    return next((r for r in results if r.get("env_id") == task), None)
+
+
+class Driver:
+    """The configured run's layout under ``--out``, its records and its units."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.a = args
+        self.out = Path(args.out).resolve()
+        self.records = self.out / "records"
+        self.deadline = Deadline(args.time_limit)
+        self.settings = make_settings(args.history)
+        self.python = args.python or sys.executable
+        self.sim_python = args.sim_python or self.python
+        self._device: str | None = None
+        self.env = dict(os.environ)
+        # Everything local: no Hub look-ups, caches inside the output root, not in ~.
+        self.env.setdefault("HF_HUB_OFFLINE", "1")
+        self.env.setdefault("HF_DATASETS_OFFLINE", "1")
+        self.env.setdefault("HF_HOME", str(self.out / "hf"))
+        self.env.setdefault("PYTHONUNBUFFERED", "1")
+        self.env["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(HERE), self.env.get("PYTHONPATH", "")) if p
+        )
+
+    # ---------------------------------------------------------------- paths and records
+    def record_path(self, task: str, unit: str) -> Path:
+        return self.records / task / f"{unit}.json"
+
+    def record(self, task: str, unit: str) -> dict[str, Any] | None:
+        """A finished unit's record, or None."""
+        rec = read_json(self.record_path(task, unit))
+        return rec if isinstance(rec, dict) and rec.get("status") == "done" else None
+
+    def wip_path(self, task: str, unit: str) -> Path:
+        return self.records / task / f".{unit}.wip.json"
+
+    def add_wip(
+        self, task: str, unit: str, entry: dict[str, Any], fresh: bool = False
+    ) -> list[dict]:
+        """Append one call's entry to the unit's in-progress list (reset when ``fresh``)."""
+        path = self.wip_path(task, unit)
+        calls = [] if fresh else (read_json(path) or [])
+        calls.append(entry)
+        write_json(path, calls)
+        return calls
+
+    def save_record(self, task: str, unit: str, fields: Mapping[str, Any]) -> dict[str, Any]:
+        """Write a finished unit's record (atomically), with the time and the driver call
+        that finished it, and drop its in-progress list."""
+        rec = {"status": "done", "unit": unit, "task": task, **fields, "finished": now()}
+        write_json(self.record_path(task, unit), {**rec, "driver": DRIVER_CALL})
+        self.wip_path(task, unit).unlink(missing_ok=True)
+        return rec
+
+    def npz_dir(self, task: str) -> Path:
+        return self.out / "data" / "data_npz" / dataset_name(task)
+
+    def lerobot_dir(self, task: str) -> Path:
+        return self.out / "data" / "data_lerobot" / dataset_name(task)
+
+    def train_dir(self, task: str, setting: str) -> Path:
+        return self.out / "train" / task / setting
+
+    def eval_dir(self, task: str, policy: str) -> Path:
+        return self.out / "eval" / task / policy
+
+    def log_path(self, task: str, unit: str) -> Path:
+        path = self.out / "logs" / task / f"{unit}.log"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+
+    @staticmethod
+    def partial(path: Path) -> Path:
+        return path.with_name(f".{path.name}.partial")
+
+    # ---------------------------------------------------------------- subprocesses
+    def cli(self, python: str, script: str, module: str) -> list[str]:
+        """The console script beside ``python``, else ``python -c`` calling its main."""
+        exe = Path(python).parent / script
+        if exe.is_file():
+            return [str(exe)]
+        return [python, "-c", f"import sys; from {module} import main; sys.exit(main())"]
+
+    def run(
+        self,
+        task: str,
+        unit: str,
+        argv: Sequence[str],
+        env: Mapping[str, str] | None = None,
+        tick: Callable[[], None] | None = None,
+    ) -> RunResult:
+        """Run a unit's command (log in ``logs/<task>/<unit>.log``) under the time limit."""
+        return run_until(
+            argv,
+            self.log_path(task, unit),
+            env or self.env,
+            self.deadline,
+            self.a.grace_s,
+            tick,
+            self.a.progress_s,
+        )
+
+    def fail(self, task: str, unit: str, why: str) -> UnitFailed:
+        """The failure of a unit, with its log's tail."""
+        log_path = self.log_path(task, unit)
+        lines = log_path.read_text(encoding="utf-8", errors="replace").splitlines()[-25:]
+        tail = "\n".join("    " + line[-300:] for line in lines)
+        return UnitFailed(f"{task} {unit}: {why}; log {rel(log_path)}:\n{tail}")
+
+    def check_time(self, task: str, unit: str, need_s: float = 0.0) -> None:
+        """Raise `TimeUp` unless at least ``--min-unit-s`` (and ``need_s``) are left."""
+        if self.deadline.remaining() < max(self.a.min_unit_s, need_s):
+            raise TimeUp(
+                f"{task} {unit}: not started, {max(self.deadline.remaining(), 0):.0f} s left"
+            )
+
+    def device(self) -> str:
+        """``--device``, with auto = cuda when the lerobot interpreter's torch sees one."""
+        if self._device is None:
+            if self.a.device != "auto":
+                self._device = self.a.device
+            else:
+                code = "import torch; print('cuda' if torch.cuda.is_available() else 'cpu')"
+                out = subprocess.run(
+                    [self.python, "-c", code], capture_output=True, text=True, env=self.env
+                )
+                self._device = out.stdout.strip() or "cpu"
+        return self._device
+
+    # ---------------------------------------------------------------- collect
+    def collected(self, task: str) -> int:
+        meta = read_json(self.npz_dir(task) / "metadata.json")
+        return int(meta.get("num_episodes", 0)) if isinstance(meta, dict) else 0
+
+    def collect(self, task: str) -> None:
+        """Oracle demonstrations as NPZ (mikasa-collect resumes by itself, episode by episode)."""
+        unit, n = "collect", self.a.episodes
+        if self.collected(task) >= n:
+            if self.record(task, unit) is None:
+                self._collect_record(task, [])
+            return
+        self.check_time(task, unit)
+        argv = self.cli(self.sim_python, "mikasa-collect", "mikasa_oracles.collect")
+        argv += ["--env-id", task, "--num-episodes", str(n), "--out", str(self.out / "data")]
+        argv += ["--workers", str(self.a.workers), "--no-progress"]
+        fresh = not self.npz_dir(task).is_dir()
+        log(f"{task}: collect {n} oracle episodes ({self.a.workers} workers)")
+        res = self.run(task, unit, argv)
+        calls = self.add_wip(task, unit, {"wall_s": round(res.wall_s, 1), "rc": res.rc}, fresh)
+        if res.rc is None:
+            raise TimeUp(f"{task} collect: stopped at {self.collected(task)}/{n} episodes")
+        if res.rc != 0 or self.collected(task) < n:
+            raise self.fail(task, unit, f"mikasa-collect exit {res.rc}")
+        self._collect_record(task, calls, argv)
+
+    def _collect_record(
+        self, task: str, calls: list[dict], argv: Sequence[str] | None = None
+    ) -> None:
+        meta = read_json(self.npz_dir(task) / "metadata.json") or {}
+        seeds = [int(s) for s in meta.get("episode_seeds", [])]
+        lengths = [int(n) for n in meta.get("episode_lengths", [])]
+        # Attempt k uses seed k (start seed 0) and episodes are the first successes in seed
+        # order, so seeds 0..last were all tried: the oracle's yield on those seeds.
+        attempts = (max(seeds) + 1) if seeds else 0
+        rec = self.save_record(
+            task,
+            "collect",
+            {
+                "episodes": len(seeds),
+                "frames": sum(lengths),
+                "attempts": attempts,
+                "yield": len(seeds) / attempts if attempts else None,
+                "wall_s": _wall_s(calls) if calls else None,
+                "calls": len(calls),
+                "command": display(argv) if argv else None,
+            },
+        )
+        log(
+            f"{task}: collected {rec['episodes']} episodes, {rec['frames']} frames "
+            f"(oracle yield {rec['episodes']}/{attempts} seeds)"
+        )
+
+    # ---------------------------------------------------------------- convert
+    def converted(self, task: str) -> dict[str, Any] | None:
+        """The LeRobot dataset's info.json when it holds the requested episodes (the NPZ
+        source may be gone: a converted dataset does not need it)."""
+        info = read_json(self.lerobot_dir(task) / "meta" / "info.json")
+        if isinstance(info, dict) and int(info.get("total_episodes", -1)) >= self.a.episodes:
+            return info
+        return None
+
+    def convert(self, task: str) -> None:
+        """NPZ -> LeRobotDataset v3 (the CLI builds in a staging directory and renames)."""
+        unit = "convert"
+        if self.converted(task) is not None:
+            if self.record(task, unit) is None:
+                self._convert_record(task, None, None)
+            return
+        if self.collected(task) < self.a.episodes:
+            raise UnitFailed(f"{task} convert: only {self.collected(task)} episodes collected")
+        self.check_time(task, unit)
+        argv = self.cli(self.python, "mikasa-datasets", "mikasa_datasets.cli")
+        argv += ["to-lerobot", "--task", task, "--from", "npz", "--root", str(self.out / "data")]
+        argv += ["--resume"]
+        if self.a.convert_workers is not None:
+            argv += ["--workers", str(self.a.convert_workers)]
+        if self.a.vcodec:
+            argv += ["--vcodec", self.a.vcodec]
+        if self.a.no_videos:
+            argv += ["--no-videos"]
+        log(f"{task}: convert to LeRobot v3")
+        res = self.run(task, unit, argv)
+        if res.rc is None:
+            raise TimeUp(f"{task} convert: stopped (it starts over next call)")
+        if res.rc != 0 or self.converted(task) is None:
+            raise self.fail(task, unit, f"to-lerobot exit {res.rc}")
+        self._convert_record(task, res.wall_s, argv)
+
+    def _convert_record(self, task: str, wall_s: float | None, argv: Sequence[str] | None) -> None:
+        info = self.converted(task) or {}
+        videos = (f for f in info.get("features", {}).values() if f.get("dtype") == "video")
+        rec = self.save_record(
+            task,
+            "convert",
+            {
+                "dataset": rel(self.lerobot_dir(task)),
+                "repo_id": dataset_name(task),
+                "episodes": info.get("total_episodes"),
+                "frames": info.get("total_frames"),
+                "fps": info.get("fps"),
+                "video_codec": next((f.get("info", {}).get("video.codec") for f in videos), None),
+                "size_mb": dir_size_mb(self.lerobot_dir(task)),
+                "wall_s": round(wall_s, 1) if wall_s is not None else None,
+                "command": display(argv) if argv else None,
+            },
+        )
+        log(
+            f"{task}: LeRobot dataset {rec['episodes']} episodes, {rec['frames']} frames, "
+            f"{rec['size_mb']} MB"
+        )
+
+    # ---------------------------------------------------------------- train
+    def train_args(self, task: str, setting: Setting) -> dict[str, str]:
+        """lerobot-train's flags (key -> value) for ``setting`` on ``task``, overrides applied."""
+        return train_flags(self.a, task, setting, str(self.lerobot_dir(task)), self.device())
+
+    def check_train_record(self, task: str, setting: Setting) -> dict[str, str]:
+        """The model-defining training flags; `UnitFailed` when the recorded training of
+        this setting used others (its checkpoint and results would not match the request)."""
+        model_key = model_flags(self.train_args(task, setting))
+        rec = self.record(task, f"train-{setting.name}")
+        if rec is not None and rec.get("model_args") != model_key:
+            raise UnitFailed(
+                f"{task} train-{setting.name}: recorded with other arguments "
+                f"({flag_diff(rec.get('model_args') or {}, model_key)}); use another --out, or "
+                f"remove {rel(self.train_dir(task, setting.name))} and the records "
+                f"{rel(self.records / task)}/{{train,eval}}-{setting.name}.json to redo it"
+            )
+        return model_key
+
+    def trained(self, task: str, setting: str) -> Path | None:
+        """The final checkpoint's pretrained_model directory, if training finished."""
+        model = _last(self.train_dir(task, setting)) / "pretrained_model"
+        return model if (model / "model.safetensors").is_file() else None
+
+    def _resume_argv(self, run_dir: Path) -> list[str]:
+        """lerobot-train resuming ``run_dir`` from its last checkpoint's own config."""
+        cfg = _last(run_dir) / "pretrained_model" / "train_config.json"
+        return [self.python, str(TRAIN_WRAPPER), f"--config_path={cfg}", "--resume=true"]
+
+    def train(self, task: str, setting: Setting) -> None:
+        """lerobot-train from scratch into a ``.partial`` directory; resumed from its last
+        checkpoint; renamed into place when the last step is saved."""
+        unit = f"train-{setting.name}"
+        args = self.train_args(task, setting)
+        model_key = self.check_train_record(task, setting)
+        if self.record(task, unit) is not None and self.trained(task, setting.name) is not None:
+            return
+        if self.converted(task) is None:
+            raise UnitFailed(f"{task} {unit}: no LeRobot dataset")
+        # Training stops itself --stop-margin-s before the limit: start only with time beyond it.
+        self.check_time(task, unit, self.a.min_unit_s + self.a.stop_margin_s)
+        final = self.train_dir(task, setting.name)
+        part = self.partial(final)
+        if final.exists():  # a finished run without its record (killed between the two)
+            shutil.move(str(final), str(part))
+        resume = _step_file(part).is_file()
+        if part.exists() and not resume:
+            shutil.rmtree(part)  # killed before its first checkpoint: start over
+        args["output_dir"] = str(part)
+        first = [self.python, str(TRAIN_WRAPPER), *(f"--{k}={v}" for k, v in args.items())]
+        if resume:
+            # The checkpoint's config is the run's; these may change between calls.
+            keep = ("policy.device", "num_workers", "log_freq", "save_freq")
+            argv = self._resume_argv(part) + [f"--{k}={args[k]}" for k in keep]
+        else:
+            argv = first
+        final.parent.mkdir(parents=True, exist_ok=True)
+        progress = final.with_name(f".{final.name}.progress.json")
+        progress.unlink(missing_ok=True)
+        env = dict(self.env)
+        if self.deadline.end is not None:
+            env["MIKASA_TRAIN_DEADLINE"] = str(
+                time.time() + self.deadline.remaining() - self.a.stop_margin_s
+            )
+        env["MIKASA_TRAIN_PROGRESS"] = str(progress)
+        step0 = read_json(_step_file(part)) if resume else None
+        log(
+            f"{task}: train {setting.name} ({setting.label}) "
+            f"{'resumed at step ' + str(step0['step']) if step0 else 'from scratch'}"
+            f", {args['steps']} steps x batch {args['batch_size']} on {args['policy.device']}"
+        )
+
+        def tick() -> None:
+            p = read_json(progress)
+            if isinstance(p, dict) and p.get("steps_this_call"):
+                rate = p["steps_this_call"] / max(p["train_loop_s_this_call"], 1e-9)
+                log(
+                    f"{task}: train {setting.name} step {p['step']}/{p['total_steps']} "
+                    f"loss {p['loss']:.4f} ({rate:.2f} steps/s, start-up excluded)"
+                )
+
+        res = self.run(task, unit, argv, env, tick)
+        p = read_json(progress) or {}
+        entry = {
+            "wall_s": round(res.wall_s, 1),
+            "rc": res.rc,
+            "steps": p.get("steps_this_call"),
+            "process_s": p.get("wall_s_this_call"),
+            "loop_s": p.get("train_loop_s_this_call"),
+            "step": p.get("step"),
+            "device": p.get("device"),
+        }
+        calls = self.add_wip(task, unit, entry, fresh=not resume)
+        if res.rc in (None, TRAIN_PAUSED):
+            raise TimeUp(f"{task} {unit}: paused at step {p.get('step')}/{args['steps']}")
+        step = (read_json(_step_file(part)) or {}).get("step", -1)
+        if res.rc != 0 or int(step) != int(args["steps"]):
+            raise self.fail(task, unit, f"lerobot-train exit {res.rc}")
+        progress.unlink(missing_ok=True)
+        part.rename(final)
+        rec = self.save_record(
+            task,
+            unit,
+            {
+                "setting": setting.name,
+                "label": setting.label,
+                "policy_type": setting.policy_type,
+                "sees": setting.sees,
+                "steps": int(args["steps"]),
+                "batch_size": int(args["batch_size"]),
+                "wall_s": _wall_s(calls),
+                "steps_per_s": _rate(calls),
+                "calls": len(calls),
+                "call_log": calls,
+                "device": p.get("device"),
+                "num_params": p.get("num_params"),
+                "final_loss": p.get("loss"),
+                "checkpoint": rel(_last(final) / "pretrained_model"),
+                "model_args": model_key,
+                "command": display(first),
+                "resume_command": display(self._resume_argv(final)),
+            },
+        )
+        log(
+            f"{task}: trained {setting.name}: {rec['steps']} steps in {rec['wall_s']:.0f} s "
+            f"({rec['calls']} call(s)), loss {rec['final_loss']:.4f}"
+        )
+
+    # ---------------------------------------------------------------- eval
+    def evaluate(self, task: str, name: str, setting: Setting | None) -> None:
+        """``mikasa-bench run`` of a trained setting (``lerobot:<checkpoint>``) or a reference
+        policy over ``--eval-episodes`` canonical episodes, into a ``.partial`` run directory."""
+        unit = f"eval-{name}"
+        train_rec = self.record(task, f"train-{name}") if setting else None
+        rec = self.record(task, unit)
+        if rec is not None:
+            stale = rec.get("n_episodes") != self.a.eval_episodes or (
+                train_rec is not None and rec.get("train_finished") != train_rec.get("finished")
+            )
+            if not stale:
+                return
+            raise UnitFailed(
+                f"{task} {unit}: the recorded evaluation has other settings "
+                f"({rec.get('n_episodes')} episodes / another training); remove "
+                f"{rel(self.record_path(task, unit))} and {rel(self.eval_dir(task, name))} to redo it"
+            )
+        if setting is not None:
+            ckpt = self.trained(task, name)
+            if ckpt is None or train_rec is None:
+                raise UnitFailed(f"{task} {unit}: not trained")
+            target = f"lerobot:{ckpt}"  # the bench resolves `last` for its label
+        else:
+            target = name
+        self.check_time(task, unit)
+        final = self.eval_dir(task, name)
+        part = self.partial(final)
+        bench = self.cli(self.python, "mikasa-bench", "mikasa_bench.cli")
+        workers = self.a.workers if self.a.eval_workers is None else self.a.eval_workers
+        common = ["--workers", str(workers), "--no-progress", "--no-report"]
+        resume = (part / "meta" / "run.json").is_file()
+        if resume:
+            argv = bench + ["run", "--resume", str(part), *common]
+        else:
+            if part.exists():
+                shutil.rmtree(part)
+            argv = bench + ["run", "--task", task, "--policy", target]
+            argv += ["--num-episodes", str(self.a.eval_episodes), "--out", str(part), *common]
+            if setting is not None:
+                argv += ["--policy-kwargs", json.dumps({"device": self.device()})]
+            if self.a.render_device:
+                argv += ["--render-device", self.a.render_device]
+        log(f"{task}: evaluate {name} over {self.a.eval_episodes} episodes")
+
+        def tick() -> None:
+            journal = part / "meta" / "episodes.jsonl"
+            if journal.is_file():
+                n = sum(1 for _ in journal.open(encoding="utf-8"))
+                log(f"{task}: evaluate {name}: {n}/{self.a.eval_episodes} episodes")
+
+        res = self.run(task, unit, argv, tick=tick)
+        entry = {"wall_s": round(res.wall_s, 1), "rc": res.rc, "command": display(argv)}
+        calls = self.add_wip(task, unit, entry, fresh=not resume)
+        if res.rc in (None, BENCH_INTERRUPTED):
+            raise TimeUp(f"{task} {unit}: stopped; the next call resumes the run")
+        result = _bench_result(part, task)
+        if res.rc != 0 or result is None:
+            raise self.fail(task, unit, f"mikasa-bench exit {res.rc}")
+        if final.exists():
+            shutil.rmtree(final)
+        part.rename(final)
+        successes = sum(bool(s) for s in result["successes"])
+        n = len(result["successes"])
+        rec = self.save_record(
+            task,
+            unit,
+            {
+                "policy": name,
+                "model": (result.get("model") or {}).get("name"),
+                "n_episodes": n,
+                "successes": successes,
+                "sr": result.get("sr"),
+                "sr_ci95": list(wilson_interval(successes, n)),
+                "mean_return": result.get("mean_return"),
+                "mean_episode_length": result.get("mean_episode_length"),
+                "canonical": result.get("canonical"),
+                "render_device": result.get("render_device"),
+                "wall_s": _wall_s(calls),
+                "calls": len(calls),
+                "result": rel(final / f"{task}.json"),
+                "command": calls[0]["command"],
+                "train_finished": train_rec.get("finished") if train_rec else None,
+            },
+        )
+        lo, hi = rec["sr_ci95"]
+        log(
+            f"{task}: {name}: SR {rec['successes']}/{rec['n_episodes']} [{lo:.0%}, {hi:.0%}] "
+            f"in {rec['wall_s']:.0f} s"
+        )

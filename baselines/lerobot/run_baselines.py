@@ -1,0 +1,294 @@
+"""LeRobot baselines on MIKASA-Robo, trained from scratch, in one resumable command.
+
+    python baselines/lerobot/run_baselines.py [--tasks ...] [--policies ...] [--time-limit S]
+
+For each task: collect oracle demonstrations (``mikasa-collect``), convert them to a
+LeRobotDataset v3 (``mikasa-datasets to-lerobot --from npz``), train each policy setting
+from scratch (``lerobot-train`` through ``lerobot_train.py`` beside this file), evaluate each
+trained policy and the reference policies (``oracle``, ``oracle-memoryless``) with
+``mikasa-bench run`` over the canonical episodes, then write the table
+(``docs/BASELINES.md`` + ``.json``) from the records. See README.md beside this file.
+
+Resumable: a unit (one task's collection, one policy's training, ...) is skipped when its
+record under ``<out>/records`` exists and the outputs that later units need are there;
+each unit builds its output under a hidden ``.partial`` path and renames it into place when
+complete (collection and conversion: the CLIs' own per-episode / staging-directory
+protocol). ``--time-limit S`` stops the call cleanly before S seconds: no unit starts without
+``--min-unit-s`` left, a running one is stopped (training checkpoints its last finished step
+first) and the next call with the same arguments goes on. Exit status: 0 all done, 3 stopped
+at the time limit (run again), 1 a unit failed (the others went on), 2 bad arguments.
+
+This file is the command line and the order of the units; beside it: ``baseline_settings``
+(the policy settings and their lerobot-train flags), ``baseline_stages`` (the units and
+their records), ``baseline_table`` (the table and the pack), ``baseline_common`` (paths,
+logging, files, running a command under the time limit). The driver runs the project's
+CLIs and lerobot-train in subprocesses; itself it needs the standard library,
+``mikasa_datasets`` (dataset names) and ``mikasa_bench`` (chance, Wilson interval, result
+files), and imports the simulator only to write the table (the task manifest).
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO, Any
+
+from baseline_common import REPO, TimeUp, UnitFailed, log, rel, write_json, write_text
+from baseline_settings import DEFAULT_REFERENCES, DEFAULT_SETTINGS, DEFAULT_TASKS, make_settings
+from baseline_stages import Driver
+from baseline_table import build_table, pack, render_markdown
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_TIME = 0, 1, 2, 3
+STAGES = ("collect", "convert", "train", "eval", "table")
+
+
+def lock(d: Driver, task: str) -> IO[str] | None:
+    """An exclusive non-blocking flock on the task's records (an open file; None when
+    another driver holds it): drivers started side by side share the tasks out."""
+    path = d.records / task / ".lock"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fh = open(path, "w")  # noqa: SIM115  # kept open as the lock's handle
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        fh.close()
+        return None
+    return fh
+
+
+def run_task(d: Driver, task: str, stages: set[str]) -> None:
+    """Every unit of one task that ``stages`` asks for and the records lack, in order:
+    collect -> convert -> the references' evaluations -> per setting train, evaluate."""
+    settings = [d.settings[s] for s in d.a.policies]
+    if stages & {"train", "eval"}:
+        for s in settings:
+            d.check_train_record(task, s)
+    need_eval = [s for s in settings if d.record(task, f"eval-{s.name}") is None]
+    need_train = [
+        s
+        for s in settings
+        if d.trained(task, s.name) is None
+        and (s in need_eval or d.record(task, f"train-{s.name}") is None)
+    ]
+    need_data = bool(need_train) and "train" in stages
+    # Collection is only needed for a dataset that is not converted yet; with "collect"
+    # asked for explicitly it runs anyway (a no-op when the episodes are there).
+    if "collect" in stages or (need_data and d.converted(task) is None):
+        d.collect(task)
+    if "convert" in stages or need_data:
+        d.convert(task)
+    if "eval" in stages:
+        for ref in d.a.references:
+            d.evaluate(task, ref, None)
+    for s in settings:
+        if "train" in stages and s in need_train:
+            d.train(task, s)
+        # Without "train" in --stages an untrained setting stays pending.
+        trained = d.trained(task, s.name) is not None
+        if "eval" in stages and (trained or d.record(task, f"eval-{s.name}") is not None):
+            d.evaluate(task, s.name, s)
+
+
+def drive(d: Driver) -> int:
+    """Every task (each under its lock), then the table and the pack; the exit status."""
+    stages = set(d.a.stages)
+    timed_out: str | None = None
+    failures: list[str] = []
+    busy: list[str] = []
+    log(
+        f"output root {rel(d.out)}; tasks {', '.join(d.a.tasks)}; policies "
+        f"{', '.join(d.a.policies)}; references {', '.join(d.a.references) or '-'}; "
+        f"time limit {d.a.time_limit or 'none'}"
+    )
+    for task in d.a.tasks if stages - {"table"} else []:
+        if timed_out:
+            break
+        held = lock(d, task)
+        if held is None:
+            busy.append(task)
+            log(f"{task}: busy (another driver holds it); skipped in this call")
+            continue
+        try:
+            run_task(d, task, stages - {"table"})
+        except TimeUp as exc:
+            timed_out = str(exc)
+        except UnitFailed as exc:
+            failures.append(str(exc))
+            log(f"FAILED {exc}")
+        finally:
+            held.close()  # releases the flock
+    if "table" in stages:
+        table = build_table(d)
+        write_text(Path(d.a.doc), render_markdown(table))
+        write_json(Path(d.a.doc).with_suffix(".json"), table)
+        log(f"table: {rel(d.a.doc)} ({table['done']}/{table['total']} results)")
+    if d.a.pack:
+        pack(d, Path(d.a.pack))
+    if failures:
+        log(f"{len(failures)} unit(s) failed")
+        return EXIT_FAILED
+    if timed_out or busy:
+        why = timed_out or f"{', '.join(busy)} held by another driver"
+        log(f"not finished: {why}; run the same command again to go on")
+        return EXIT_TIME
+    log("all done")
+    return EXIT_OK
+
+
+# ------------------------------------------------------------------------------------------
+# command line
+# ------------------------------------------------------------------------------------------
+
+
+def _csv(text: str) -> list[str]:
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        description="Collect -> convert -> train (lerobot-train, from scratch) -> evaluate "
+        "(mikasa-bench) -> docs/BASELINES.md, resumable and time-limited.",
+    )
+    add = p.add_argument
+
+    def csv(flag: str, default: Sequence[str], text: str) -> None:
+        add(flag, type=_csv, default=list(default), help=text)
+
+    def number(flag: str, kind: type, default: float | None, text: str, **kw: Any) -> None:
+        add(flag, type=kind, default=default, help=text, **kw)
+
+    cpus = os.cpu_count() or 1
+    csv("--tasks", DEFAULT_TASKS, "comma-separated env ids (default: the six of issue 15)")
+    csv(
+        "--policies",
+        DEFAULT_SETTINGS,
+        "comma-separated settings: act, act-chunk, diffusion, diffusion-hist "
+        "(default: act,diffusion,diffusion-hist)",
+    )
+    csv(
+        "--references",
+        DEFAULT_REFERENCES,
+        "bench policies evaluated beside them (default: oracle,oracle-memoryless; '' for none)",
+    )
+    csv("--stages", STAGES, f"comma-separated subset of {','.join(STAGES)}")
+    add(
+        "--scale",
+        choices=("full", "tiny"),
+        default="full",
+        help="tiny: minute-sized models for smoke tests on a CPU",
+    )
+    number("--history", int, 8, "observation steps of diffusion-hist (default 8)")
+    number("--episodes", int, 200, "oracle demonstrations per task (default 200)")
+    number("--steps", int, 3000, "training steps per policy (default 3000)")
+    number("--batch-size", int, 32, "training batch size (default 32)")
+    add(
+        "--train-arg",
+        action="append",
+        default=[],
+        metavar="[SETTING:]KEY=VALUE",
+        help="extra lerobot-train flag, e.g. policy.optimizer_lr=1e-5 or "
+        "diffusion:batch_size=64 (repeatable)",
+    )
+    number(
+        "--save-freq",
+        int,
+        None,
+        "checkpoint every N steps (default: at the end and at the time limit)",
+    )
+    number("--log-freq", int, 100, "lerobot-train's log interval (default 100)")
+    number("--seed", int, 1000, "training seed (default 1000, lerobot's)")
+    number("--eval-episodes", int, 50, "evaluation episodes (default 50, canonical)")
+    add(
+        "--device",
+        default="auto",
+        help="training/inference device: auto (cuda if available), cuda, cpu",
+    )
+    number(
+        "--workers", int, cpus, "collection and evaluation worker processes (default: CPU count)"
+    )
+    number(
+        "--eval-workers",
+        int,
+        None,
+        "mikasa-bench run --workers (default --workers; 0 = in the bench's own process)",
+    )
+    number(
+        "--train-workers",
+        int,
+        min(8, cpus),
+        "lerobot-train data loader workers (default min(8, CPUs))",
+    )
+    number("--convert-workers", int, None, "to-lerobot writer processes (default: its own)")
+    add("--vcodec", default=None, help="to-lerobot --vcodec (default: its own)")
+    add(
+        "--no-videos",
+        action="store_true",
+        help="to-lerobot --no-videos (PNG frames; no video decoding in training)",
+    )
+    add(
+        "--video-backend",
+        default=None,
+        help="lerobot-train --dataset.video_backend (pyav, torchcodec)",
+    )
+    add(
+        "--render-device",
+        default=None,
+        choices=("auto", "cpu", "gpu"),
+        help="mikasa-bench --render-device",
+    )
+    add(
+        "--out",
+        default=str(REPO / "runs" / "lerobot_baselines"),
+        help="output root (default runs/lerobot_baselines)",
+    )
+    add(
+        "--doc",
+        default=str(REPO / "docs" / "BASELINES.md"),
+        help="table path (default docs/BASELINES.md; JSON beside it)",
+    )
+    add(
+        "--pack",
+        default=None,
+        metavar="FILE.tar.gz",
+        help="also pack records, table and log tails into this file",
+    )
+    number("--time-limit", float, None, "stop cleanly before S seconds", metavar="S")
+    number("--min-unit-s", float, 30.0, "start no unit with less time left (default 30)")
+    number(
+        "--stop-margin-s",
+        float,
+        45.0,
+        "training checkpoints and stops this long before the limit (default 45)",
+    )
+    number("--grace-s", float, 20.0, "SIGINT -> SIGTERM delay when stopping a command (default 20)")
+    number("--progress-s", float, 60.0, "progress line interval during long units (default 60)")
+    add(
+        "--python",
+        default=None,
+        help="interpreter with lerobot, the envs and mikasa-bench (default: this one)",
+    )
+    add("--sim-python", default=None, help="interpreter for mikasa-collect (default: --python)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; the exit status is in the module docstring."""
+    args = build_parser().parse_args(argv)
+    known = make_settings(args.history)
+    bad = [s for s in args.policies if s not in known] + [s for s in args.stages if s not in STAGES]
+    if bad or args.history < 1 or args.episodes < 1 or args.steps < 1 or args.eval_episodes < 1:
+        print(
+            f"run_baselines: bad arguments {bad or ''} (settings: {', '.join(known)}; stages: "
+            f"{', '.join(STAGES)}; counts must be >= 1)",
+            file=sys.stderr,
+        )
+        return EXIT_USAGE
+    return drive(Driver(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

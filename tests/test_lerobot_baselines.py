@@ -1,0 +1,186 @@
+"""The LeRobot baseline driver (baselines/lerobot/run_baselines.py, issue 15 §3).
+
+The end-to-end test needs lerobot 0.4.x next to the MIKASA envs: in the main environment
+this file contributes one test that runs it inside `.venv-datasets` (tests/test_validate.py's
+mechanism, as tests/test_lerobot_policy.py does), plus checks of the driver's pure parts
+(settings, flags, the table) that need neither lerobot nor the simulator.
+
+Inside `.venv-datasets`, at tiny scale on one task (RememberColor3-VLA-v0, 3 oracle
+episodes, a 1+1-layer ACT of width 64 for 6 steps on the CPU, 2 evaluation episodes):
+collect -> convert -> oracle evaluation; a training call that stops at its deadline after
+one step (exit 3); the next call resumes it from the checkpoint, finishes and evaluates;
+a last call finds everything done and only rewrites the table.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# The driver's directory, as `python baselines/lerobot/run_baselines.py` has it on sys.path.
+sys.path.insert(0, str(REPO / "baselines" / "lerobot"))
+
+import baseline_settings as bs  # noqa: E402
+import baseline_table as bt  # noqa: E402
+import run_baselines as rb  # noqa: E402
+from baseline_stages import Driver  # noqa: E402
+
+IN_LEROBOT_ENV = all(
+    importlib.util.find_spec(m) is not None for m in ("lerobot", "mikasa_bench", "mani_skill")
+)
+TASK = "RememberColor3-VLA-v0"
+
+
+# ----------------------------------------------------------------------- pure parts (both)
+def test_settings_memoryless_and_history() -> None:
+    """Memoryless settings see one frame and re-plan every step; the history setting's
+    horizon fits its window and the U-Net's down-sampling."""
+    settings = bs.make_settings(history=8)
+    assert set(bs.DEFAULT_SETTINGS) <= set(settings)
+    for name in ("act", "diffusion"):
+        s = settings[name]
+        assert s.memoryless
+        assert s.args["policy.n_obs_steps"] == "1" and s.args["policy.n_action_steps"] == "1"
+        assert s.args["policy.pretrained_backbone_weights"] == "null"
+    hist = settings["diffusion-hist"]
+    assert not hist.memoryless and hist.args["policy.n_obs_steps"] == "8"
+    horizon = int(hist.args["policy.horizon"])
+    assert horizon % 8 == 0 and horizon >= 8 - 1 + 8
+    assert (
+        settings["act-chunk"].args["policy.n_action_steps"]
+        == settings["act"].args["policy.chunk_size"]
+    )
+    assert bs.horizon(12, 8, 8) == 24 and bs.horizon(1, 8, 8) == 8
+
+
+def test_train_args_overrides(tmp_path: Path) -> None:
+    """--train-arg applies to every setting or, with SETTING:, to one; values may hold ':'."""
+    args = rb.build_parser().parse_args(
+        [
+            "--out", str(tmp_path), "--device", "cpu", "--scale", "tiny",
+            "--train-arg", "policy.optimizer_lr=3e-4",
+            "--train-arg", "diffusion:batch_size=64",
+            "--train-arg", "act:policy.device=cuda:1",
+        ]
+    )  # fmt: skip
+    d = Driver(args)
+    act = d.train_args(TASK, d.settings["act"])
+    diff = d.train_args(TASK, d.settings["diffusion"])
+    assert act["policy.optimizer_lr"] == diff["policy.optimizer_lr"] == "3e-4"
+    assert diff["batch_size"] == "64" and act["batch_size"] == "32"
+    assert act["policy.device"] == "cuda:1" and diff["policy.device"] == "cpu"
+    assert act["policy.dim_model"] == "64"  # tiny scale
+    assert act["dataset.repo_id"] == "remember_color_3_vla_v0"
+    assert act["policy.push_to_hub"] == "false" and act["wandb.enable"] == "false"
+
+
+def test_vs_chance() -> None:
+    """The verdict compares chance with the record's (mikasa-bench's Wilson) interval."""
+    rec = {"status": "done", "sr_ci95": [0.05, 0.3]}
+    assert bt._vs_chance(rec, 1 / 3) == "below"
+    assert bt._vs_chance(rec, 0.1) == "at chance"
+    assert bt._vs_chance(rec, 0.0) == "above"
+    assert bt._vs_chance(None, 0.5) is None
+
+
+def test_bad_arguments_exit_2(capsys) -> None:
+    assert rb.main(["--policies", "act,nope", "--out", "/nonexistent"]) == rb.EXIT_USAGE
+    assert "nope" in capsys.readouterr().err
+
+
+if not IN_LEROBOT_ENV:
+    from test_validate import run_suite_in_datasets_env
+
+    def test_lerobot_baselines_suite_in_datasets_env() -> None:
+        """The end-to-end test below, run inside `.venv-datasets`."""
+        run_suite_in_datasets_env(__file__)
+
+else:
+
+    def _driver(out: Path, *extra: str) -> int:
+        argv = [
+            "--tasks", TASK, "--policies", "act", "--references", "oracle", "--scale", "tiny",
+            "--episodes", "3", "--steps", "6", "--batch-size", "4", "--eval-episodes", "2",
+            "--device", "cpu", "--workers", "1", "--eval-workers", "0", "--train-workers", "0",
+            "--log-freq", "2", "--out", str(out), "--doc", str(out / "BASELINES.md"),
+            *extra,
+        ]  # fmt: skip
+        return rb.main(argv)
+
+    def _commands_run(out: Path) -> int:
+        """Commands the driver started so far (each is logged as a '$ ' line)."""
+        return sum(
+            line.startswith("$ ")
+            for log in (out / "logs").rglob("*.log")
+            for line in log.read_text(encoding="utf-8").splitlines()
+        )
+
+    def test_tiny_end_to_end(tmp_path: Path) -> None:
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        out = tmp_path / "run"
+        records = out / "records" / TASK
+
+        # 1) data and the oracle; the learned policy stays pending without "train".
+        assert _driver(out, "--stages", "collect,convert,eval") == rb.EXIT_OK
+        collect = json.loads((records / "collect.json").read_text())
+        convert = json.loads((records / "convert.json").read_text())
+        assert collect["episodes"] == convert["episodes"] == 3
+        assert convert["frames"] == collect["frames"] > 0
+        oracle = json.loads((records / "eval-oracle.json").read_text())
+        assert oracle["n_episodes"] == 2 and oracle["successes"] == 2
+        assert not (records / "eval-act.json").exists()
+
+        # 2) training stops at its deadline after its first step (stop margin ~ the limit).
+        rc = _driver(out, "--stages", "train,eval", "--time-limit", "300",
+                     "--stop-margin-s", "299", "--min-unit-s", "0")  # fmt: skip
+        assert rc == rb.EXIT_TIME
+        partial = out / "train" / TASK / ".act.partial"
+        step = json.loads(
+            (partial / "checkpoints" / "last" / "training_state" / "training_step.json").read_text()
+        )["step"]
+        assert 1 <= step < 6
+        cfg = json.loads(
+            (
+                partial / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+            ).read_text()
+        )
+        assert cfg["save_freq"] == 6  # the configured value, not the stop's
+        assert not (records / "train-act.json").exists()
+
+        # 3) resumed from that checkpoint, finished, evaluated; the table written.
+        assert _driver(out) == rb.EXIT_OK
+        train = json.loads((records / "train-act.json").read_text())
+        assert train["steps"] == 6 and train["calls"] == 2
+        assert train["call_log"][1]["steps"] == 6 - step
+        assert not partial.exists()
+        ckpts = [p.name for p in (out / "train" / TASK / "act" / "checkpoints").iterdir()]
+        assert sorted(ckpts) == ["000006", "last"]  # older checkpoints pruned
+        ev = json.loads((records / "eval-act.json").read_text())
+        assert ev["n_episodes"] == 2 and ev["model"].startswith("lerobot-act-act-")
+        table = json.loads((out / "BASELINES.json").read_text())
+        assert table["done"] == table["total"] == 2 and not table["pending"]
+        md = (out / "BASELINES.md").read_text()
+        assert "| RememberColor3-VLA-v0 | Object | 0.333 | 2/2 = 100% [34%, 100%] |" in md
+        assert "lerobot_train.py --dataset.repo_id=remember_color_3_vla_v0" in md
+        assert "mikasa-bench run --task RememberColor3-VLA-v0 --policy lerobot:" in md
+
+        # 4) everything done: no command runs again, the table is rewritten.
+        before = _commands_run(out)
+        assert _driver(out, "--pack", str(tmp_path / "pack.tar.gz")) == rb.EXIT_OK
+        assert _commands_run(out) == before
+        assert (tmp_path / "pack.tar.gz").stat().st_size > 0
+
+        # 5) other training arguments are refused, not silently mixed with the records.
+        assert _driver(out, "--steps", "7", "--stages", "train,eval") == rb.EXIT_FAILED
+
+    @pytest.fixture(autouse=True)
+    def _quiet_torch() -> None:
+        import torch
+
+        torch.set_num_threads(1)
