@@ -7,9 +7,10 @@ mechanism, as tests/test_lerobot_policy.py does), plus checks of the driver's pu
 
 Inside `.venv-datasets`, at tiny scale on one task (RememberColor3-VLA-v0, 3 oracle
 episodes, a 1+1-layer ACT of width 64 for 6 steps on the CPU, 2 evaluation episodes):
-collect -> convert -> oracle evaluation; a training call that stops at its deadline after
-one step (exit 3); the next call resumes it from the checkpoint, finishes and evaluates;
-a last call finds everything done and only rewrites the table.
+collect -> convert -> oracle evaluation; a training call (checkpoint every 2 steps) that the
+driver terminates once a checkpoint 2 steps in is saved (exit 3; steps after that checkpoint
+are lost); the next call resumes it from that checkpoint with lerobot's --resume, finishes
+and evaluates; a last call finds everything done and only rewrites the table.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "baselines" / "lerobot"))
 
 import baseline_settings as bs  # noqa: E402
+import baseline_stages as bst  # noqa: E402
 import baseline_table as bt  # noqa: E402
 import run_baselines as rb  # noqa: E402
 from baseline_stages import Driver  # noqa: E402
@@ -89,6 +91,32 @@ def test_vs_chance() -> None:
     assert bt._vs_chance(None, 0.5) is None
 
 
+def test_train_log_and_checkpoint_pruning(tmp_path: Path) -> None:
+    """Progress comes from lerobot-train's own log lines (tqdm noise around them; rounded
+    step numbers counted instead); pruning keeps the checkpoint `last` points to."""
+    text = (
+        "INFO 2026-01-01 10:00:00 ot_train.py:339 num_total_params=1234 (1K)\n"
+        "Training:   0%|  | 0/3000 [00:00<?, ?step/s]INFO 2026-01-01 10:00:02 ot_train.py:403 "
+        "Start offline training on a fixed dataset, with effective batch size: 4\n"
+        "Training: 50%|  | 1500/3000 [00:01<00:01]INFO 2026-01-01 10:00:12 ot_train.py:435 "
+        "step:2K smpl:8 ep:1 epch:0.18 loss:0.741 grdn:34.0 lr:1.0e-04\n"
+        "INFO 2026-01-01 10:00:13 ot_train.py:455 Checkpoint policy after step 1500\n"
+        "INFO 2026-01-01 10:00:22 ot_train.py:435 step:2K smpl:8 ep:1 epch:0.2 loss:0.5 grdn:1\n"
+    )
+    p = bst.parse_train_log(text, 1000, 500)
+    assert p == {"step": 2000, "steps": 1000, "loss": 0.5, "num_params": 1234, "loop_s": 20.0}
+    ckpts = tmp_path / "checkpoints"
+    for step in (2, 4, 6):  # 6: a save cut short by the stop
+        (ckpts / f"{step:06d}" / "training_state").mkdir(parents=True)
+    (ckpts / "000004" / "training_state" / "training_step.json").write_text('{"step": 4}')
+    assert bst._prune_checkpoints(tmp_path) is None  # no `last` yet
+    (ckpts / "last").symlink_to("000004")
+    assert bst._prune_checkpoints(tmp_path) == 4
+    assert sorted(c.name for c in ckpts.iterdir()) == ["000004", "000006", "last"]
+    assert bst._prune_checkpoints(tmp_path, stopped=True) == 4
+    assert sorted(c.name for c in ckpts.iterdir()) == ["000004", "last"]
+
+
 def test_bad_arguments_exit_2(capsys) -> None:
     assert rb.main(["--policies", "act,nope", "--out", "/nonexistent"]) == rb.EXIT_USAGE
     assert "nope" in capsys.readouterr().err
@@ -136,28 +164,29 @@ else:
         assert oracle["n_episodes"] == 2 and oracle["successes"] == 2
         assert not (records / "eval-act.json").exists()
 
-        # 2) training stops at its deadline after its first step (stop margin ~ the limit).
-        rc = _driver(out, "--stages", "train,eval", "--time-limit", "300",
-                     "--stop-margin-s", "299", "--min-unit-s", "0")  # fmt: skip
+        # 2) the driver terminates training once it has checkpointed 2 steps.
+        rc = _driver(out, "--stages", "train,eval", "--save-freq", "2",
+                     "--train-steps-per-call", "2", "--time-limit", "600")  # fmt: skip
         assert rc == rb.EXIT_TIME
         partial = out / "train" / TASK / ".act.partial"
-        step = json.loads(
-            (partial / "checkpoints" / "last" / "training_state" / "training_step.json").read_text()
-        )["step"]
-        assert 1 <= step < 6
-        cfg = json.loads(
-            (
-                partial / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
-            ).read_text()
-        )
-        assert cfg["save_freq"] == 6  # the configured value, not the stop's
+        last = partial / "checkpoints" / "last"
+        step = json.loads((last / "training_state" / "training_step.json").read_text())["step"]
+        assert step in (2, 4)
+        cfg = json.loads((last / "pretrained_model" / "train_config.json").read_text())
+        assert cfg["save_freq"] == 2 and cfg["steps"] == 6
+        # Only the checkpoint `last` points to is kept (a save cut short included).
+        assert sorted(p.name for p in last.parent.iterdir()) == [f"{step:06d}", "last"]
         assert not (records / "train-act.json").exists()
+        wip = json.loads((records / ".train-act.wip.json").read_text())
+        assert wip[0]["rc"] is None and wip[0]["step"] == step and wip[0]["steps"] >= step
 
         # 3) resumed from that checkpoint, finished, evaluated; the table written.
         assert _driver(out) == rb.EXIT_OK
         train = json.loads((records / "train-act.json").read_text())
         assert train["steps"] == 6 and train["calls"] == 2
-        assert train["call_log"][1]["steps"] == 6 - step
+        assert train["call_log"][1]["steps"] == 6 - step and train["call_log"][1]["step"] == 6
+        assert train["num_params"] > 0 and train["final_loss"] is not None
+        assert train["device"] == "cpu" and train["steps_per_s"] > 0
         assert not partial.exists()
         ckpts = [p.name for p in (out / "train" / TASK / "act" / "checkpoints").iterdir()]
         assert sorted(ckpts) == ["000006", "last"]  # older checkpoints pruned

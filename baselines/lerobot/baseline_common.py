@@ -139,10 +139,14 @@ def run_until(
     grace_s: float,
     tick: Callable[[], None] | None = None,
     tick_s: float = 60.0,
+    stop: Callable[[], bool] | None = None,
+    first_signal: int = signal.SIGINT,
 ) -> RunResult:
     """Run ``argv`` (output appended to ``log_path``, cwd the repository) until it exits or
-    ``deadline`` passes; then SIGINT its process group, SIGTERM after ``grace_s``, SIGKILL
-    10 s later. ``tick`` is called every ``tick_s`` while it runs (progress lines)."""
+    ``deadline`` passes (or ``stop()``, polled every second, says so); then send
+    ``first_signal`` (SIGINT) to its process group, SIGTERM after ``grace_s`` (unless the
+    first was SIGTERM), SIGKILL 10 s after that. ``tick`` is called every ``tick_s`` while it
+    runs (progress lines)."""
     t0 = time.monotonic()
     with open(log_path, "a", encoding="utf-8") as fh:
         fh.write(f"\n# {now()}\n$ {display(argv)}\n")
@@ -156,7 +160,10 @@ def run_until(
             start_new_session=True,  # its own group: a stop reaches its workers too
         )
         stop_at: float | None = None
-        signals = [(0.0, signal.SIGINT), (grace_s, signal.SIGTERM), (grace_s + 10, signal.SIGKILL)]
+        signals = [(0.0, first_signal)]
+        if first_signal != signal.SIGTERM:
+            signals.append((grace_s, signal.SIGTERM))
+        signals.append((signals[-1][0] + 10, signal.SIGKILL))
         last_tick = time.monotonic()
         while True:
             try:
@@ -168,7 +175,7 @@ def run_until(
             if tick is not None and t - last_tick >= tick_s:
                 last_tick = t
                 tick()
-            if stop_at is None and deadline.expired():
+            if stop_at is None and (deadline.expired() or (stop is not None and stop())):
                 stop_at = t
             if stop_at is not None:
                 while signals and t - stop_at >= signals[0][0]:

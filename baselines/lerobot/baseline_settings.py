@@ -189,10 +189,11 @@ def train_flags(
         "steps": str(args.steps),
         "batch_size": str(args.batch_size),
         "num_workers": str(args.train_workers),
-        "save_freq": str(args.save_freq or args.steps),
         "log_freq": str(args.log_freq),
         "job_name": f"{dataset_name(task)}-{setting.name}",
     }
+    if args.save_freq:  # else the driver chooses it from the training rate
+        d["save_freq"] = str(args.save_freq)
     if args.video_backend:
         d["dataset.video_backend"] = args.video_backend
     for item in args.train_arg:

@@ -12,12 +12,14 @@ units need are there is skipped.
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 import os
+import re
 import shutil
+import signal
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -53,7 +55,9 @@ from mikasa_bench.results import load_run
 __all__ = ["Driver", "TRAIN_WRAPPER"]
 
 TRAIN_WRAPPER = HERE / "lerobot_train.py"
-TRAIN_PAUSED = 75  # lerobot_train.EXIT_PAUSED (not imported: the driver needs no lerobot)
+GUESS_STEPS_PER_S = {"cpu": 0.2, "cuda": 5.0}
+"""Training steps/s assumed for `Driver.auto_save_freq` until one is measured (low on purpose:
+too frequent checkpoints cost seconds, too rare ones lose training at a stop)."""
 BENCH_INTERRUPTED = 130
 
 
@@ -79,6 +83,60 @@ def _rate(calls: Sequence[Mapping[str, Any]]) -> float | None:
     return round(steps / loop, 3) if steps and loop > 0 else None
 
 
+def _prune_checkpoints(run_dir: Path, stopped: bool = False) -> int | None:
+    """Remove the run's numbered checkpoints before the one ``checkpoints/last`` points to
+    (only ``last`` is resumed or evaluated; each holds the weights and the optimizer state)
+    and, once the process has ``stopped``, any after it (a save cut short); the step of
+    ``last``, or None before the first checkpoint."""
+    last = _last(run_dir)
+    step = read_json(_step_file(run_dir))
+    if not isinstance(step, dict) or not last.is_symlink():
+        return None
+    keep = last.resolve().name
+    for other in last.parent.iterdir():
+        if other.name.isdigit() and other.name != keep and not other.is_symlink():
+            if stopped or int(other.name) < int(keep):
+                shutil.rmtree(other, ignore_errors=True)
+    return int(step["step"])
+
+
+_INFO_LINE = re.compile(r"INFO (\d{4}-\d\d-\d\d \d\d:\d\d:\d\d) +\S+ (.*)")
+_LOG_STEP = re.compile(r"step:\S+ .*\bloss:(\S+)")
+_SAVED = re.compile(r"Checkpoint policy after step (\d+)")
+_PARAMS = re.compile(r"num_total_params=(\d+)")
+
+
+def parse_train_log(text: str, start_step: int, log_freq: int) -> dict[str, Any]:
+    """What one lerobot-train call's output (from ``start_step``) says: the last step it is
+    known to have reached (its ``log_freq`` lines and checkpoint lines; the step numbers of
+    its log lines are rounded, "2K", so they are counted instead), the steps since
+    ``start_step``, the last logged loss (an average over the log interval), the parameter
+    count, and the training loop's time (from "Start offline training" to the last of those
+    lines; lerobot's timestamps have 1 s resolution)."""
+    step, loss, params, t0, t1, logged = start_step, None, None, None, None, 0
+    for m in _INFO_LINE.finditer(text):
+        t = dt.datetime.strptime(m[1], "%Y-%m-%d %H:%M:%S").timestamp()
+        msg = m[2]
+        if msg.startswith("Start offline training"):
+            t0 = t
+        elif (hit := _LOG_STEP.match(msg)) and log_freq > 0:
+            logged += 1
+            step = max(step, (start_step // log_freq + logged) * log_freq)
+            loss, t1 = float(hit[1]), t
+        elif hit := _SAVED.match(msg):
+            step, t1 = max(step, int(hit[1])), t
+        elif hit := _PARAMS.match(msg):
+            params = int(hit[1])
+    loop_s = t1 - t0 if t0 is not None and t1 is not None else None
+    return {
+        "step": step,
+        "steps": step - start_step,
+        "loss": loss,
+        "num_params": params,
+        "loop_s": loop_s,
+    }
+
+
 def _bench_result(run_dir: Path, task: str) -> dict[str, Any] | None:
     """``task``'s result in a finished ``mikasa-bench run`` directory, or None."""
     try:
@@ -100,6 +158,7 @@ class Driver:
         self.python = args.python or sys.executable
         self.sim_python = args.sim_python or self.python
         self._device: str | None = None
+        self._device_names: dict[str, str] = {}
         self.env = dict(os.environ)
         # Everything local: no Hub look-ups, caches inside the output root, not in ~.
         self.env.setdefault("HF_HUB_OFFLINE", "1")
@@ -202,18 +261,27 @@ class Driver:
                 f"{task} {unit}: not started, {max(self.deadline.remaining(), 0):.0f} s left"
             )
 
+    def _torch_says(self, code: str) -> str:
+        """What ``code`` prints in the lerobot interpreter (with torch imported as ``torch``)."""
+        argv = [self.python, "-c", f"import torch; print({code})"]
+        return subprocess.run(argv, capture_output=True, text=True, env=self.env).stdout.strip()
+
     def device(self) -> str:
         """``--device``, with auto = cuda when the lerobot interpreter's torch sees one."""
         if self._device is None:
-            if self.a.device != "auto":
-                self._device = self.a.device
-            else:
-                code = "import torch; print('cuda' if torch.cuda.is_available() else 'cpu')"
-                out = subprocess.run(
-                    [self.python, "-c", code], capture_output=True, text=True, env=self.env
-                )
-                self._device = out.stdout.strip() or "cpu"
+            auto = self.a.device == "auto"
+            probe = "'cuda' if torch.cuda.is_available() else 'cpu'"
+            self._device = (self._torch_says(probe) or "cpu") if auto else self.a.device
         return self._device
+
+    def device_name(self, args: Mapping[str, str]) -> str:
+        """The training device of ``args`` as records note it: ``cpu`` or the GPU's name."""
+        dev = args["policy.device"]
+        if dev not in self._device_names:
+            cuda = dev.startswith("cuda")
+            name = self._torch_says(f"torch.cuda.get_device_name({dev!r})") if cuda else ""
+            self._device_names[dev] = name or dev
+        return self._device_names[dev]
 
     # ---------------------------------------------------------------- collect
     def collected(self, task: str) -> int:
@@ -356,9 +424,29 @@ class Driver:
         cfg = _last(run_dir) / "pretrained_model" / "train_config.json"
         return [self.python, str(TRAIN_WRAPPER), f"--config_path={cfg}", "--resume=true"]
 
+    def _rate_seen(self, setting: Setting, args: Mapping[str, str]) -> float | None:
+        """Steps/s of a finished training of ``setting`` (any task) at the same batch size on
+        the same device, from its record."""
+        for path in sorted(self.records.glob(f"*/train-{setting.name}.json")):
+            rec = read_json(path) or {}
+            same = rec.get("batch_size") == int(args["batch_size"])
+            if same and rec.get("device") == self.device_name(args) and rec.get("steps_per_s"):
+                return float(rec["steps_per_s"])
+        return None
+
+    def auto_save_freq(self, setting: Setting, args: Mapping[str, str], calls: list) -> int:
+        """lerobot's ``save_freq`` for about one checkpoint every ``--save-every-s`` of
+        training: the rate measured by this run's earlier calls, else by a finished run of
+        the setting, else `GUESS_STEPS_PER_S` for the device."""
+        rate = _rate(calls) or self._rate_seen(setting, args)
+        if rate is None:
+            rate = GUESS_STEPS_PER_S["cpu" if args["policy.device"] == "cpu" else "cuda"]
+        return max(1, min(int(args["steps"]), int(rate * self.a.save_every_s)))
+
     def train(self, task: str, setting: Setting) -> None:
-        """lerobot-train from scratch into a ``.partial`` directory; resumed from its last
-        checkpoint; renamed into place when the last step is saved."""
+        """lerobot-train from scratch into a ``.partial`` directory; stopped (SIGTERM) at the
+        time limit and resumed from its last checkpoint by the next call (the steps after that
+        checkpoint are lost); renamed into place when the last step is saved."""
         unit = f"train-{setting.name}"
         args = self.train_args(task, setting)
         model_key = self.check_train_record(task, setting)
@@ -366,15 +454,19 @@ class Driver:
             return
         if self.converted(task) is None:
             raise UnitFailed(f"{task} {unit}: no LeRobot dataset")
-        # Training stops itself --stop-margin-s before the limit: start only with time beyond it.
+        # Training is stopped --stop-margin-s before the limit: start only with time beyond it.
         self.check_time(task, unit, self.a.min_unit_s + self.a.stop_margin_s)
         final = self.train_dir(task, setting.name)
         part = self.partial(final)
         if final.exists():  # a finished run without its record (killed between the two)
             shutil.move(str(final), str(part))
-        resume = _step_file(part).is_file()
+        start = _prune_checkpoints(part, stopped=True) if part.exists() else None
+        resume = start is not None
         if part.exists() and not resume:
-            shutil.rmtree(part)  # killed before its first checkpoint: start over
+            shutil.rmtree(part)  # stopped before its first checkpoint: start over
+        start = start or 0
+        earlier = (read_json(self.wip_path(task, unit)) or []) if resume else []
+        args.setdefault("save_freq", str(self.auto_save_freq(setting, args, earlier)))
         args["output_dir"] = str(part)
         first = [self.python, str(TRAIN_WRAPPER), *(f"--{k}={v}" for k, v in args.items())]
         if resume:
@@ -384,48 +476,68 @@ class Driver:
         else:
             argv = first
         final.parent.mkdir(parents=True, exist_ok=True)
-        progress = final.with_name(f".{final.name}.progress.json")
-        progress.unlink(missing_ok=True)
-        env = dict(self.env)
-        if self.deadline.end is not None:
-            env["MIKASA_TRAIN_DEADLINE"] = str(
-                time.time() + self.deadline.remaining() - self.a.stop_margin_s
-            )
-        env["MIKASA_TRAIN_PROGRESS"] = str(progress)
-        step0 = read_json(_step_file(part)) if resume else None
         log(
             f"{task}: train {setting.name} ({setting.label}) "
-            f"{'resumed at step ' + str(step0['step']) if step0 else 'from scratch'}"
-            f", {args['steps']} steps x batch {args['batch_size']} on {args['policy.device']}"
+            f"{f'resumed at step {start}' if resume else 'from scratch'}, {args['steps']} "
+            f"steps x batch {args['batch_size']} on {args['policy.device']}, "
+            f"checkpoint every {args['save_freq']} steps"
         )
+        log_path = self.log_path(task, unit)
+        offset = log_path.stat().st_size if log_path.exists() else 0
+
+        def progress() -> dict[str, Any]:
+            with open(log_path, encoding="utf-8", errors="replace") as fh:
+                fh.seek(offset)
+                return parse_train_log(fh.read(), start, int(args["log_freq"]))
 
         def tick() -> None:
-            p = read_json(progress)
-            if isinstance(p, dict) and p.get("steps_this_call"):
-                rate = p["steps_this_call"] / max(p["train_loop_s_this_call"], 1e-9)
+            p = progress()
+            if p["steps"] and p["loop_s"]:
+                loss = "?" if p["loss"] is None else f"{p['loss']:.4f}"
                 log(
-                    f"{task}: train {setting.name} step {p['step']}/{p['total_steps']} "
-                    f"loss {p['loss']:.4f} ({rate:.2f} steps/s, start-up excluded)"
+                    f"{task}: train {setting.name} step ~{p['step']}/{args['steps']} loss {loss} "
+                    f"({p['steps'] / p['loop_s']:.2f} steps/s, start-up excluded)"
                 )
 
-        res = self.run(task, unit, argv, env, tick)
-        p = read_json(progress) or {}
+        def stop() -> bool:
+            # Older checkpoints go while it runs (each holds the weights and optimizer state).
+            saved = _prune_checkpoints(part)
+            per_call = self.a.train_steps_per_call
+            return bool(per_call) and saved is not None and saved >= start + per_call
+
+        train_deadline = Deadline(self.deadline.remaining() - self.a.stop_margin_s)
+        res = run_until(
+            argv,
+            log_path,
+            self.env,
+            train_deadline,
+            self.a.grace_s,
+            tick,
+            self.a.progress_s,
+            stop=stop,
+            first_signal=signal.SIGTERM,
+        )
+        p = progress()
+        saved = _prune_checkpoints(part, stopped=True)
         entry = {
             "wall_s": round(res.wall_s, 1),
             "rc": res.rc,
-            "steps": p.get("steps_this_call"),
-            "process_s": p.get("wall_s_this_call"),
-            "loop_s": p.get("train_loop_s_this_call"),
-            "step": p.get("step"),
-            "device": p.get("device"),
+            "steps": p["steps"],  # trained in this call, lost ones included
+            "loop_s": p["loop_s"],
+            "step": saved,  # the last checkpoint's: where the next call resumes
+            "lost_steps": max(p["step"] - (saved or 0), 0),
+            "save_freq": int(args["save_freq"]),
+            "device": self.device_name(args),
         }
         calls = self.add_wip(task, unit, entry, fresh=not resume)
-        if res.rc in (None, TRAIN_PAUSED):
-            raise TimeUp(f"{task} {unit}: paused at step {p.get('step')}/{args['steps']}")
-        step = (read_json(_step_file(part)) or {}).get("step", -1)
-        if res.rc != 0 or int(step) != int(args["steps"]):
+        done = saved == int(args["steps"]) and res.rc in (0, None)
+        if res.rc is None and not done:
+            raise TimeUp(
+                f"{task} {unit}: stopped at step ~{p['step']}; resumes from the checkpoint "
+                f"at step {saved or 0}/{args['steps']}"
+            )
+        if not done:
             raise self.fail(task, unit, f"lerobot-train exit {res.rc}")
-        progress.unlink(missing_ok=True)
         part.rename(final)
         rec = self.save_record(
             task,
@@ -441,9 +553,9 @@ class Driver:
                 "steps_per_s": _rate(calls),
                 "calls": len(calls),
                 "call_log": calls,
-                "device": p.get("device"),
-                "num_params": p.get("num_params"),
-                "final_loss": p.get("loss"),
+                "device": entry["device"],
+                "num_params": p["num_params"],
+                "final_loss": p["loss"],
                 "checkpoint": rel(_last(final) / "pretrained_model"),
                 "model_args": model_key,
                 "command": display(first),
@@ -452,7 +564,7 @@ class Driver:
         )
         log(
             f"{task}: trained {setting.name}: {rec['steps']} steps in {rec['wall_s']:.0f} s "
-            f"({rec['calls']} call(s)), loss {rec['final_loss']:.4f}"
+            f"({rec['calls']} call(s)), loss {rec['final_loss']}"
         )
 
     # ---------------------------------------------------------------- eval

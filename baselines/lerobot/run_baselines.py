@@ -14,8 +14,9 @@ record under ``<out>/records`` exists and the outputs that later units need are 
 each unit builds its output under a hidden ``.partial`` path and renames it into place when
 complete (collection and conversion: the CLIs' own per-episode / staging-directory
 protocol). ``--time-limit S`` stops the call cleanly before S seconds: no unit starts without
-``--min-unit-s`` left, a running one is stopped (training checkpoints its last finished step
-first) and the next call with the same arguments goes on. Exit status: 0 all done, 3 stopped
+``--min-unit-s`` left, a running one is stopped (training is terminated and resumes from its
+last checkpoint: the steps after it are lost) and the next call with the same arguments goes
+on. Exit status: 0 all done, 3 stopped
 at the time limit (run again), 1 a unit failed (the others went on), 2 bad arguments.
 
 This file is the command line and the order of the units; beside it: ``baseline_settings``
@@ -197,7 +198,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--save-freq",
         int,
         None,
-        "checkpoint every N steps (default: at the end and at the time limit)",
+        "checkpoint every N steps (default: from the training rate, see --save-every-s)",
+    )
+    number(
+        "--save-every-s",
+        float,
+        60.0,
+        "without --save-freq: checkpoint about this often (default 60; a stop loses the "
+        "steps since the last checkpoint)",
+    )
+    number(
+        "--train-steps-per-call",
+        int,
+        None,
+        "stop a training call once it has checkpointed N steps beyond its start (the next "
+        "call resumes; a deterministic split, e.g. for tests)",
     )
     number("--log-freq", int, 100, "lerobot-train's log interval (default 100)")
     number("--seed", int, 1000, "training seed (default 1000, lerobot's)")
@@ -232,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     add(
         "--video-backend",
         default=None,
-        help="lerobot-train --dataset.video_backend (pyav, torchcodec)",
+        help="lerobot-train --dataset.video_backend (default: lerobot's, torchcodec)",
     )
     add(
         "--render-device",
@@ -261,10 +276,10 @@ def build_parser() -> argparse.ArgumentParser:
     number(
         "--stop-margin-s",
         float,
-        45.0,
-        "training checkpoints and stops this long before the limit (default 45)",
+        15.0,
+        "training is stopped (SIGTERM, SIGKILL after 10 s) this long before the limit (default 15)",
     )
-    number("--grace-s", float, 20.0, "SIGINT -> SIGTERM delay when stopping a command (default 20)")
+    number("--grace-s", float, 20.0, "SIGINT -> SIGTERM delay when stopping a non-training command")
     number("--progress-s", float, 60.0, "progress line interval during long units (default 60)")
     add(
         "--python",
