@@ -29,7 +29,6 @@ from __future__ import annotations
 import functools
 import os
 import re
-import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -80,50 +79,18 @@ MIKASA_OUTPUT_FEATURES: dict[str, tuple[str, tuple[int, ...]]] = {
 """What MIKASA takes: one ``pd_ee_delta_pose`` action of 7 values."""
 
 INSTALL_HINT = (
-    'pip install "lerobot>=0.4,<0.5" beside mikasa-bench (on this repository\'s CPU '
-    "machines: scripts/setup_datasets_envs.sh, then run .venv-datasets/bin/mikasa-bench)"
+    'pip install "lerobot>=0.4,<0.5" mikasa-datasets beside mikasa-bench (on this '
+    "repository's CPU machines: scripts/setup_datasets_envs.sh, then run "
+    ".venv-datasets/bin/mikasa-bench)"
 )
 PROCESSOR_FILES = ("policy_preprocessor.json", "policy_postprocessor.json")
 README_HINT = "see packages/mikasa-bench/README.md, 'LeRobot policies and lerobot-eval'"
 
-_TORCHVISION_OPS_LIB: Any = None  # keeps the placeholder op library alive
 
 
 # ------------------------------------------------------------------------------------
 # importing lerobot
 # ------------------------------------------------------------------------------------
-
-
-def _ensure_torchvision() -> None:
-    """Make ``import torchvision`` work with a CPU torch and PyPI's CUDA torchvision.
-
-    The same workaround as `mikasa_datasets.lerobot` (read there why): torchvision's ``_C``
-    ops library links against libtorch_cuda, so next to a CPU torch its import dies
-    registering fake kernels for ``torchvision::nms``/``qnms``. Declaring those two
-    schemas through torch's public ``torch.library`` lets the pure-Python parts (models,
-    transforms: what lerobot's policies use) import. A torchvision that loads is left as is.
-    """
-    global _TORCHVISION_OPS_LIB
-    try:
-        import torchvision  # noqa: F401
-    except ImportError:
-        return  # not installed: lerobot's import says what is missing
-    except RuntimeError as exc:
-        if "torchvision::" not in str(exc):
-            raise
-        for name in [m for m in sys.modules if m == "torchvision" or m.startswith("torchvision.")]:
-            del sys.modules[name]
-        import torch
-
-        if _TORCHVISION_OPS_LIB is None:
-            _TORCHVISION_OPS_LIB = torch.library.Library("torchvision", "DEF")
-            _TORCHVISION_OPS_LIB.define(
-                "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-            )
-            _TORCHVISION_OPS_LIB.define(
-                "qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-            )
-        import torchvision  # noqa: F401,F811
 
 
 @functools.cache
@@ -137,7 +104,11 @@ def import_lerobot() -> Any:
         import torch  # noqa: F401
     except ImportError as exc:
         raise BenchError(f"LeRobot policies need torch ({exc}); {INSTALL_HINT}") from None
-    _ensure_torchvision()
+    try:  # the project's one torchvision workaround lives beside its LeRobot datasets code
+        from mikasa_datasets.lerobot import ensure_torchvision_importable
+    except ImportError as exc:
+        raise BenchError(f"LeRobot policies need mikasa-datasets ({exc}); {INSTALL_HINT}") from None
+    ensure_torchvision_importable()
     try:
         import lerobot
         import lerobot.policies.factory  # noqa: F401

@@ -35,7 +35,7 @@ why, and what the writer corrects after lerobot: :mod:`mikasa_datasets.lerobot_w
 Environment notes (see the package README): lerobot 0.4.x pins torch<2.11 but its
 dataset code runs on the repository's torch 2.13 CPU; PyPI's torchvision wheels are CUDA
 builds whose C++ ops cannot load next to a CPU torch, which breaks ``import torchvision``
-(needed by lerobot only for ``torchvision.transforms``). :func:`_ensure_torchvision`
+(needed by lerobot only for ``torchvision.transforms``). :func:`ensure_torchvision_importable`
 works around that. Hugging Face Hub access is switched off (``HF_HUB_OFFLINE=1``) before
 lerobot is imported: everything here is local.
 """
@@ -59,6 +59,7 @@ from mikasa_datasets.rlds import ConversionResult
 
 __all__ = [
     "ACTION_KEY",
+    "ensure_torchvision_importable",
     "DEFAULT_FPS",
     "DEFAULT_VCODEC",
     "DONE_KEY",
@@ -126,19 +127,23 @@ IMAGE_SHAPE = (128, 128, 3)
 _TORCHVISION_OPS_LIB: Any = None  # keeps the placeholder op library alive
 
 
-def _ensure_torchvision() -> None:
+def ensure_torchvision_importable() -> None:
     """Make ``import torchvision`` work with a CPU torch and PyPI's CUDA torchvision.
 
     torchvision's ``_C`` ops library links against libtorch_cuda, so with the CPU build of
     torch it fails to load (torchvision tolerates that), and then its import dies
     registering fake kernels for ``torchvision::nms``/``qnms``, ops that only ``_C``
-    defines. Declaring those two schemas first lets the pure-Python parts (transforms,
-    which lerobot uses) import; the detection ops stay unusable, and nothing here calls
-    them. A torchvision whose ``_C`` loads is left untouched.
+    defines. Declaring those two schemas first through torch's public ``torch.library``
+    lets the pure-Python parts (models, transforms: what lerobot's dataset and policy code
+    use) import; the detection ops stay unusable, and nothing here calls them. A
+    torchvision whose ``_C`` loads is left untouched; a missing one is left to the importer
+    to report. Also used by mikasa-bench's LeRobot policies (`mikasa_bench.lerobot_policy`).
     """
     global _TORCHVISION_OPS_LIB
     try:
         import torchvision  # noqa: F401
+    except ImportError:
+        return
     except RuntimeError as exc:
         if "torchvision::" not in str(exc):
             raise
@@ -146,13 +151,14 @@ def _ensure_torchvision() -> None:
             del sys.modules[name]
         import torch
 
-        _TORCHVISION_OPS_LIB = torch.library.Library("torchvision", "DEF")
-        _TORCHVISION_OPS_LIB.define(
-            "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-        )
-        _TORCHVISION_OPS_LIB.define(
-            "qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-        )
+        if _TORCHVISION_OPS_LIB is None:
+            _TORCHVISION_OPS_LIB = torch.library.Library("torchvision", "DEF")
+            _TORCHVISION_OPS_LIB.define(
+                "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
+            )
+            _TORCHVISION_OPS_LIB.define(
+                "qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
+            )
         import torchvision  # noqa: F401,F811
 
 
@@ -166,7 +172,7 @@ def lerobot_dataset_class() -> type:
     os.environ.setdefault("TF_ENABLE_ONEDNN_OPTS", "0")
     os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints a banner per encoder otherwise
     require("torch", "lerobot")
-    _ensure_torchvision()
+    ensure_torchvision_importable()
     return require("lerobot.datasets.lerobot_dataset", "lerobot").LeRobotDataset
 
 
