@@ -74,18 +74,10 @@ def policy_chunk_size(policy: Any) -> int:
 
 def reset_policy(policy: Any, seed: int) -> None:
     """Call ``policy.reset(seed=seed)`` or ``policy.reset()``, whichever it accepts; no-op
-    for policies without ``reset``."""
-    reset = getattr(policy, "reset", None)
-    if not callable(reset):
-        return
-    try:
-        params = inspect.signature(reset).parameters
-    except (TypeError, ValueError):  # builtins without a signature
-        params = {}
-    if "seed" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        reset(seed=seed)
-    else:
-        reset()
+    for policies without ``reset`` (the oracles' rollout does the same)."""
+    from mikasa_oracles.rollout import reset_with_seed
+
+    reset_with_seed(policy, seed)
 
 
 class ZeroPolicy:

@@ -42,14 +42,21 @@ class Rollout:
     episode_return: float
 
 
-def reset_with_seed(policy: Policy, seed: int) -> None:
+def reset_with_seed(policy: Any, seed: int) -> None:
     """``policy.reset(seed=seed)`` where ``reset`` takes a seed (e.g. a memoryless oracle,
-    whose guesses it seeds), else ``policy.reset()``."""
-    params = inspect.signature(policy.reset).parameters
-    if "seed" in params:
-        policy.reset(seed=seed)  # type: ignore[call-arg]
+    whose guesses it seeds), else ``policy.reset()``; no-op for a policy without ``reset``.
+    (mikasa-bench's ``reset_policy`` is this function.)"""
+    reset = getattr(policy, "reset", None)
+    if not callable(reset):
+        return
+    try:
+        params = inspect.signature(reset).parameters
+    except (TypeError, ValueError):  # builtins without a signature
+        params = {}
+    if "seed" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        reset(seed=seed)
     else:
-        policy.reset()
+        reset()
 
 
 def rollout(env: gym.Env, policy: Policy, seed: int, stop_on_success: bool = False) -> Rollout:
