@@ -32,7 +32,14 @@ if [ "$need_vulkan" -eq 1 ]; then
     mesa-vulkan-drivers libvulkan1 >/dev/null
 fi
 
-# 2. Virtual environment with every package editable.
+# 2. Headless Chromium (Debian's): the gallery test looks at the page in a real browser.
+if ! command -v chromium >/dev/null 2>&1; then
+  echo "[setup] installing Chromium (the headless browser of the gallery test)"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
+fi
+
+# 3. Virtual environment with every package editable.
 if [ ! -x "$VENV/bin/python" ]; then
   echo "[setup] creating $VENV"
   "$PYTHON" -m venv "$VENV"

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import BenchError
+from .gallery import add_gallery_parser, run_gallery
 from .protocol import (
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,
@@ -192,6 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--title", default=None)
 
     add_validity_parser(sub)
+    add_gallery_parser(sub)
     cmp_ = sub.add_parser(
         "compare",
         help="per-task deltas of B against A; exit 1 if B is significantly worse on any task",
@@ -607,6 +609,7 @@ _COMMANDS = {
     "compare": _cmd_compare,
     "serve": _cmd_serve,
     "validity": run_validity,
+    "gallery": run_gallery,
 }
 
 
