@@ -81,12 +81,17 @@ class SubEnvSpec:
             raise ValueError(f"noop_steps applies to the RL ids only; {self.env_id} is a VLA id (use 1)")
         if not vla:
             env_info(self.env_id, self.noop_steps)
+        # The trainers' normalized_dense is upstream's, dense / DENSE_REWARD_MAX unclipped.
+        # The envs clip theirs to [0, 1] (their published contract), and clipped, every
+        # exploring step whose smoothness penalty outweighs the rest is worth exactly 0:
+        # PPO gets no signal (baselines/RESULTS.md, "The clipped reward trap").
+        upstream_normalized = self.reward_mode == "normalized_dense"
         env = gym.make(
             self.env_id,
             num_envs=1,
             obs_mode=env_obs_mode(self.mode),
             control_mode=self.control_mode or default_control_mode(self.env_id),
-            reward_mode=self.reward_mode,
+            reward_mode="dense" if upstream_normalized else self.reward_mode,
             render_mode=self.render_mode,
             reconfiguration_freq=self.reconfiguration_freq,
             sim_backend="cpu",
@@ -97,6 +102,10 @@ class SubEnvSpec:
                 env = apply_vla_rl_wrappers(env, self.mode)
             else:
                 env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
+            if upstream_normalized:
+                env = gym.wrappers.TransformReward(
+                    env, partial(torch.div, other=float(env.unwrapped.DENSE_REWARD_MAX))
+                )
             if self.video_dir is not None and index == 0:
                 from mani_skill.utils.wrappers.record import RecordEpisode
 
