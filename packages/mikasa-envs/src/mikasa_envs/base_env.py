@@ -3,7 +3,9 @@
 It holds what ``common.md`` says all tasks share: the Panda on the ManiSkill table, the two
 128x128 sensor cameras, the robot's initial joint configuration and noise, the
 cue / memory / action phase timing drawn from the episode seed, the language instruction,
-``task_cue`` / ``oracle_info``, reward normalisation and input validation.
+``task_cue`` / ``oracle_info``, reward normalisation and input validation, and the saving and
+restoring of each task's own state with ManiSkill's state API (``get_state_dict`` /
+``set_state_dict``; see ``TASK_STATE``).
 """
 
 from __future__ import annotations
@@ -16,11 +18,11 @@ import sapien
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
-from mani_skill.utils import sapien_utils
+from mani_skill.utils import common, sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
 from mani_skill.utils.structs.types import GPUMemoryConfig, SimConfig
 
-from mikasa_envs import render_batcher
+from mikasa_envs import render_batcher, task_state
 from mikasa_envs.building_blocks.ground import coarsen_ground_visual
 from mikasa_envs.camera_group import (
     CameraGroupRenderer,
@@ -71,6 +73,28 @@ class MikasaVLABaseEnv(BaseEnv):
     BASE_CAMERA_TARGET: ClassVar[tuple[float, float, float]] = (-0.1, 0.0, 0.1)
     RENDER_CAMERA_EYE: ClassVar[tuple[float, float, float]] = (0.5, 1.0, 1.0)
     RENDER_CAMERA_TARGET: ClassVar[tuple[float, float, float]] = (-0.3, 0.0, 0.0)
+
+    # ---- saved state (get_state_dict / set_state_dict) ----
+    # The task's own per-episode state, saved next to ManiSkill's simulation state under
+    # "task" and restored by set_state_dict: every attribute that changes during an episode
+    # and that stepping reads (phase lengths, the answer, layouts, latches, counters, what a
+    # lamp or button shows). Each class names the attributes it adds (the lists are
+    # collected over the MRO, mixins included): tensors with one row per env, dicts or lists
+    # of them, or building blocks that name their tensors in STATE_ATTRS. ManiSkill's
+    # elapsed-step counter, which the phases read, is saved too ("elapsed_steps").
+    TASK_STATE: ClassVar[tuple[str, ...]] = (
+        "cue_steps_per_env",
+        "empty_steps_per_env",
+        "task_cue",
+        "oracle_info",
+        "_prev_action",
+    )
+    # Attributes that change during an episode but are deliberately not saved: caches that
+    # `_on_state_restored` drops or rebuilds, and the previous step's reward terms
+    # (info["reward_dict"] is one step stale: None on the first step after a restore, as
+    # after a reset). tests/test_save_restore.py fails on any other attribute that differs
+    # after a restore, so a new family cannot silently leave state out.
+    TRANSIENT_STATE: ClassVar[tuple[str, ...]] = ("_reward_dict",)
 
     agent: LightPandaWristCam
 
@@ -133,7 +157,10 @@ class MikasaVLABaseEnv(BaseEnv):
         n = self.num_envs
         self.cue_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
         self.empty_steps_per_env = torch.zeros(n, dtype=torch.int64, device=self.device)
-        self._prev_action: torch.Tensor | None = None
+        # The previous action of the smoothness penalty (zeros until the first step); a
+        # tensor from the start so that every saved state has it.
+        action_shape = getattr(self.agent.single_action_space, "shape", None) or (0,)
+        self._prev_action: torch.Tensor | None = torch.zeros(n, int(np.prod(action_shape)), device=self.device)
 
     def _clear(self) -> None:
         # ManiSkill's _clear (3.0.1) without its full gc.collect(), which `close` does
@@ -304,6 +331,79 @@ class MikasaVLABaseEnv(BaseEnv):
         info["reward_dict"] = self._reward_dict
         return info
 
+    # ---------------------------------------------------------- saved state
+    @classmethod
+    def task_state_names(cls) -> tuple[str, ...]:
+        """The attributes ``get_state_dict`` saves under "task" (``TASK_STATE`` over the MRO)."""
+        return _collect_over_mro(cls, "TASK_STATE")
+
+    @classmethod
+    def transient_state_names(cls) -> tuple[str, ...]:
+        """The attributes deliberately not saved (``TRANSIENT_STATE`` over the MRO)."""
+        return _collect_over_mro(cls, "TRANSIENT_STATE")
+
+    def get_state_dict(self) -> dict:
+        """ManiSkill's state dict (actors, articulations, controller) plus the task's own
+        state under "task": (num_envs, -1) tensors, nested dicts for building blocks."""
+        state = super().get_state_dict()
+        state["task"] = self.get_task_state()
+        return state
+
+    def get_task_state(self) -> dict:
+        """The elapsed-step counter and the ``task_state_names`` attributes, packed."""
+        n = self.num_envs
+        state = {"elapsed_steps": task_state.pack(self._elapsed_steps, n, "elapsed_steps")}
+        for name in self.task_state_names():
+            packed = task_state.pack(getattr(self, name), n, name)
+            if packed is not None:
+                state[name] = packed
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: torch.Tensor | None = None) -> None:
+        """Restore a ``get_state_dict`` state in every env, or in the envs ``env_idx``.
+
+        ManiSkill's own version restores the simulation only; this one also restores the
+        controller (targets of the ``*_target_*`` control modes) and the task's state,
+        elapsed steps included, so that stepping on repeats what followed the save. A state
+        without "task" (e.g. recorded before tasks saved theirs) restores the simulation only.
+        """
+        super().set_state_dict(state, env_idx)
+        rows = None if env_idx is None else torch.as_tensor(env_idx, device=self.device).long().reshape(-1)
+        if state.get("controller"):
+            controller = self.agent.get_controller_state()
+            self.agent.set_controller_state(
+                task_state.restored(controller, state["controller"], rows, self.num_envs, "controller")
+            )
+        if "task" in state:
+            self.set_task_state(state["task"], rows)
+
+    def set_task_state(self, task: dict, env_idx: torch.Tensor | None = None) -> None:
+        """Put back a ``get_task_state`` dict (in the envs ``env_idx``; None: all)."""
+        n = self.num_envs
+        rows = None if env_idx is None else torch.as_tensor(env_idx, device=self.device).long().reshape(-1)
+        if "elapsed_steps" in task:
+            self._elapsed_steps = task_state.restored(self._elapsed_steps, task["elapsed_steps"], rows, n, "elapsed_steps")
+        for name in self.task_state_names():
+            if name in task:
+                setattr(self, name, task_state.restored(getattr(self, name), task[name], rows, n, name))
+        self._on_state_restored(torch.arange(n, device=self.device) if rows is None else rows)
+
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        """Drop or rebuild what is derived from the task state (families extend this)."""
+        self._reward_dict = None
+
+    def set_state(self, state: Any, env_idx: torch.Tensor | None = None) -> None:
+        """Restore a flat state vector from ``get_state()``.
+
+        ManiSkill's version rebuilds only the actors and articulations from the vector and
+        drops the rest; this one splits it back into the whole state dict (the layout of the
+        env's first state) and restores that with ``set_state_dict``.
+        """
+        flat = common.to_tensor(state, device=self.device)
+        if flat.ndim == 1:
+            flat = flat[None]
+        self.set_state_dict(task_state.unflatten_like(self._init_raw_state, flat), env_idx)
+
     # --------------------------------------------------------------- reward
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
         """Dense reward divided by its success value, clipped to [0, 1]."""
@@ -327,6 +427,14 @@ class MikasaVLABaseEnv(BaseEnv):
     def arm_qvel(self) -> torch.Tensor:
         """(B, 7) arm joint velocities (fingers excluded)."""
         return self.agent.robot.get_qvel()[..., :NUM_ARM_JOINTS]
+
+
+def _collect_over_mro(cls: type, attribute: str) -> tuple[str, ...]:
+    """The names listed in ``attribute`` by ``cls`` and its bases, bases first, no repeats."""
+    names: dict[str, None] = {}
+    for klass in reversed(cls.__mro__):
+        names.update(dict.fromkeys(klass.__dict__.get(attribute, ())))
+    return tuple(names)
 
 
 class UnsupportedRobotError(ValueError, NotImplementedError):

@@ -10,6 +10,7 @@ the depth rule and (where a family counts presses) the press / release / lift la
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import ClassVar
 
 import sapien
 import torch
@@ -51,6 +52,9 @@ def press_depth(
 
 class Button:
     """A base box and a cap cylinder, both kinematic with collision (or visual only)."""
+
+    # Per-env state saved with the env's task state (``MikasaVLABaseEnv.TASK_STATE``).
+    STATE_ATTRS: ClassVar[tuple[str, ...]] = ("xy", "quat", "depth")
 
     def __init__(
         self,
@@ -134,6 +138,9 @@ class PressLatch:
     that height after a release. ``release_gate`` / ``press_gate`` say in which envs steps 1
     and 2-3 may happen (e.g. the action phase; "pressable").
     """
+
+    # Per-env state saved with the env's task state (``MikasaVLABaseEnv.TASK_STATE``).
+    STATE_ATTRS: ClassVar[tuple[str, ...]] = ("ready", "pending", "press_start_z")
 
     def __init__(self, num_envs: int, device: torch.device | str) -> None:
         self.ready = torch.ones(num_envs, dtype=torch.bool, device=device)

@@ -10,6 +10,7 @@ GatherAndRecall and BatteriesChecker share the geometry.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import ClassVar
 
 import sapien
 import torch
@@ -52,6 +53,9 @@ class ColorSwitchLamp:
     ``{"off": ((255, 255, 255), 0.0), "red": ((255, 0, 0), 2.0)}``; bulb k is the k-th entry.
     Call ``place`` in ``_initialize_episode`` and ``show`` whenever the lamp changes.
     """
+
+    # Per-env state saved with the env's task state (``MikasaVLABaseEnv.TASK_STATE``).
+    STATE_ATTRS: ClassVar[tuple[str, ...]] = ("position", "shown")
 
     def __init__(
         self,

@@ -11,6 +11,7 @@ one around it so the inner rings are drawn on top. A cylinder's axis is its loca
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import ClassVar
 
 import numpy as np
 import sapien
@@ -85,6 +86,9 @@ class SwitchingTarget:
     Both discs share a spot; the one not shown waits at ``HIDDEN_Z`` above it (outside
     every camera's view). Which disc is shown is per env (``switched``, (B,) bool).
     """
+
+    # Per-env state saved with the env's task state (``MikasaVLABaseEnv.TASK_STATE``).
+    STATE_ATTRS: ClassVar[tuple[str, ...]] = ("xy", "switched")
 
     def __init__(
         self,

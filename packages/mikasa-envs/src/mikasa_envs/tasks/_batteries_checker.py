@@ -150,6 +150,25 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
 
     batteries: list[Actor]
 
+    TASK_STATE = (
+        "tray_center",
+        "tray_slot_positions",
+        "socket_slot_pos",
+        "working_mask",
+        "checked_mask",
+        "found_mask",
+        "action_stage",
+        "active_battery_idx",
+        "lamp_afterglow",
+        "press_ready",
+        "lamp",
+        "button",
+        "_events",
+        "_grasped",
+        "_battery_pos",
+        "_tcp_pos",
+    )
+
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.active_battery_count = self.ACTIVE_BATTERIES
         self.button_top_z = self.BUTTON_TOP_Z

@@ -104,6 +104,28 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     button_top_z: float = BUTTON_TOP_Z
     cubes: dict[int, Actor]
 
+    # The pinned layouts (_layouts, _layouts_np) are rebuilt from these on a restore.
+    TASK_STATE = (
+        "true_color_indices",
+        "target_keys",
+        "sequence_cubes_mask",
+        "layout_poses",
+        "button",
+        "press_latch",
+        "_button_goal",
+        "touched_cubes",
+        "button_pressed",
+        "button_press_count",
+        "button_pressable",
+        "next_target_mask",
+        "_mean_displacement",
+        "all_seq_touched",
+        "no_extra_touched",
+    )
+    # CPU pinning caches (dropped on restore) and the last frame's cube positions, which
+    # evaluate() refreshes (None: the observation reads them live).
+    TRANSIENT_STATE = ("_cubes_free_from", "_cpu_pin_cache", "_cube_positions")
+
     # ------------------------------------------------------------------ scene
     GPU_MEMORY: ClassVar[dict[str, int]] = {
         "found_lost_pairs_capacity": 2**25,
@@ -282,6 +304,13 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
             self.scene.px.gpu_fetch_rigid_dynamic_data()
         write_actor_poses(self.scene, self.cube_actors, idx, poses, zero_velocity=True)
         self.scene.px.gpu_apply_rigid_dynamic_data()
+
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        super()._on_state_restored(env_idx)
+        self._cubes_free_from = None
+        self._cpu_pin_cache = None
+        self._cube_positions = None
+        self._build_frame_layouts(env_idx)
 
     def _before_control_step(self) -> None:
         # The frame this step produces is elapsed_steps + 1 (incremented after physics).
@@ -493,6 +522,7 @@ class OrderedColorSequenceVLABaseEnv(ColorSequenceVLABaseEnv):
     # Per-item cue duration d (uniform int, inclusive); the cue lasts C = d·L steps.
     CUE_STEP_DURATION: ClassVar[tuple[int, int]] = (1, 5)
     CUE_SPOT: ClassVar[tuple[float, float, float]] = (0.0, 0.0, CUBE_HALF_SIZE)
+    TASK_STATE = ("cue_step_duration_per_env", "touched_cubes_idx")
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

@@ -47,6 +47,7 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
     ball: Actor
 
     GPU_MEMORY: ClassVar[dict[str, int]] = SMALL_SCENE_GPU_MEMORY
+    TASK_STATE = ("ball_start_pos", "launch_velocity")
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)

@@ -88,6 +88,8 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
     EMPTY_PHASE_STEPS = (0, 0)
     RENDER_CAMERA_EYE = (0.6, 0.7, 0.6)
     RENDER_CAMERA_TARGET = (0.0, 0.0, 0.35)
+    # language_instruction is rebuilt from task_cue on a restore.
+    TASK_STATE = ("initial_rotations", "initial_peg_position", "_robot_static")
 
     peg: Actor
 
@@ -124,14 +126,17 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
 
     # ------------------------------------------------------------- episodes
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        # Torch draws, in this order: peg centre x, y; start heading θ0; the target's u.
+        # As the reference (its seed-0 reset reproduced): numpy, each env's episode RNG, the
+        # target's u ~ U[0, 1) for every reset env, then the start heading θ0 ~ U[0, 2π) (before
+        # the arm noise, common.md §11); then torch: the peg centre x, y.
         b = len(env_idx)
+        rngs = self._batched_episode_rng[env_idx.cpu().numpy()]
+        u = torch.as_tensor(rngs.uniform(0.0, 1.0), dtype=torch.float64, device=self.device)  # float16 at the end
+        theta0 = torch.as_tensor(rngs.uniform(0.0, 2 * math.pi), dtype=torch.float32, device=self.device)
         spread = self.PEG_SPAWN_HALF_RANGE
         xyz = torch.zeros(b, 3, device=self.device)
         xyz[:, :2] = torch.rand(b, 2, device=self.device) * (2 * spread) - spread
         xyz[:, 2] = self.PEG_HALF_WIDTH
-        theta0 = torch.rand(b, device=self.device) * (2 * math.pi)
-        u = torch.rand(b, device=self.device)
         quat = torch.zeros(b, 4, device=self.device)
         quat[:, 0] = torch.cos(theta0 / 2)
         quat[:, 3] = torch.sin(theta0 / 2)
@@ -149,6 +154,11 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
         # No phases (and no random draws for them): the action phase starts at t = 0.
         self.cue_steps_per_env[env_idx] = 0
         self.empty_steps_per_env[env_idx] = 0
+
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        super()._on_state_restored(env_idx)
+        for i, degrees in zip(env_idx.tolist(), target_degrees(self.task_cue[env_idx]).tolist(), strict=True):
+            self.language_instruction[i] = self.LANGUAGE_INSTRUCTION.format(angle_deg=degrees)
 
     # --------------------------------------------------------------- queries
     @property

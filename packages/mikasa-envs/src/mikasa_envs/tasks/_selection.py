@@ -143,6 +143,10 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
     task_objects: list[Actor]
     # Whether each object's origin sits at its own rest height (else at FIXED_OBJECT_Z).
     FIXED_OBJECT_Z: ClassVar[float | None] = None
+    # The pinned layouts (_layouts, _layouts_np) are rebuilt from these on a restore.
+    TASK_STATE = ("answer_index", "cue_poses", "action_poses", "cue_visible", "manip_layout_applied")
+    # The CPU "objects are free" step: a cache the pinning recomputes (dropped on restore).
+    TRANSIENT_STATE = ("_free_from_step",)
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:
@@ -269,6 +273,11 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         mask = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         mask[env_idx] = True
         self._pin(self.elapsed_steps, first_substep=True, env_mask=mask)
+
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        super()._on_state_restored(env_idx)
+        self._free_from_step = None
+        self._frame_layouts(env_idx)
 
     def _before_control_step(self) -> None:
         # Lay out the frame this step produces (elapsed_steps + 1; the counter is incremented

@@ -40,6 +40,9 @@ from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, write_actor_poses
 NUM_SLOTS = 3
 MUG_NAMES = ("mug_left", "mug_center", "mug_right")
 SLOT_NAMES = ("Left", "Center", "Right")
+# The shuffle's draws (``ScriptedShellGameVLABaseEnv``), which only the families with a
+# shuffle hold: their TASK_STATE.
+SHUFFLE_TASK_STATE = ("shuffle_steps_per_env", "num_swaps_per_env", "steps_per_swap_per_env", "swap_pairs", "slot_of_mug")
 
 
 def normalized_quat(wxyz: Sequence[float]) -> tuple[float, float, float, float]:
@@ -101,6 +104,7 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
         "max_rigid_patch_count": 2**21,
         "max_rigid_contact_count": 2**22,
     }
+    TASK_STATE = ("slot_positions", "final_slot_of_mug", "final_positions", "_tcp_pose")
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:
@@ -241,6 +245,7 @@ class TouchMugMixin:
     MUG_DISPLACEMENT_PENALTY_COEF: ClassVar[float] = 0.1
     MUG_DISPLACEMENT_SUCCESS_THRESH: ClassVar[float] = 0.05
     DENSE_REWARD_MAX = 3.0
+    TASK_STATE = ("_target_mug_pose",)
 
     def evaluate(self) -> dict:
         """Placed, static, mug displacement and success (gated on the action phase)."""
@@ -301,6 +306,7 @@ class RedBallMixin:
     in during the action phase."""
 
     BALL_RGBA: ClassVar[tuple[int, int, int, int]] = (255, 0, 0, 255)
+    TASK_STATE = ("cup_with_ball_number",)
 
     def _load_task_objects(self) -> None:
         self.red_ball = build_ball(self.scene, "red_ball", self.BALL_RGBA, self.BALL_RADIUS)
@@ -337,6 +343,8 @@ class HiddenBallShellGameVLABaseEnv(RedBallMixin, ShellGameVLABaseEnv):
 
     MUG_BODY_TYPE = "dynamic"
     BALL_FOLLOW_LIFT: ClassVar[float] = 0.05
+    # The CPU "mugs are free" step: a cache the pinning recomputes (dropped on restore).
+    TRANSIENT_STATE = ("_free_after_step",)
 
     def _load_task_objects(self) -> None:
         super()._load_task_objects()
@@ -380,6 +388,10 @@ class HiddenBallShellGameVLABaseEnv(RedBallMixin, ShellGameVLABaseEnv):
         positions[..., 2] += torch.where(t < cue, self.HEIGHT_OFFSET, 0.0)[:, None]
         return self._write_poses(self.mugs, pinned, self._mug_poses_from_positions(positions), zero_velocity=True)
 
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        super()._on_state_restored(env_idx)
+        self._free_after_step = None
+
     def _ball_follows_mug(self) -> bool:
         if not self.gpu_sim_enabled:
             mug = self.mugs[int(self.cup_with_ball_number[0])]._objs[0].pose.p
@@ -400,6 +412,7 @@ class GoalSiteMixin:
 
     GOAL_SITE_RADIUS: ClassVar[float]
     GOAL_SITE_RGBA: ClassVar[tuple[int, int, int, int]] = (0, 255, 0, 255)
+    TASK_STATE = ("goal_pos",)
 
     def _build_goal_site(self) -> None:
         self.goal_site = actor_builders.build_sphere(
@@ -583,6 +596,7 @@ class ColorLampShellGameVLABaseEnv(ScriptedShellGameVLABaseEnv):
     LAMP_BEHIND_OFFSET_X: ClassVar[float] = 0.25
     LAMP_HEIGHT: ClassVar[float] = 0.06
     DENSE_REWARD_MAX = 3.0
+    TASK_STATE = ("target_color", "lamp")
 
     def _load_task_objects(self) -> None:
         self.balls = [build_ball(self.scene, name, rgba, self.BALL_RADIUS) for name, rgba in BALL_COLORS.items()]

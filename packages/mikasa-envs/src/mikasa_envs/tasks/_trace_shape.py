@@ -96,8 +96,8 @@ def checkpoints_of(waypoints: torch.Tensor) -> torch.Tensor:
 class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     """Scene, shape draws, demonstration timeline and checkpoint scoring of both trace families.
 
-    Subclasses set ``SHAPE_SET``, ``MAX_ELEMENTS`` and ``_sample_element_shapes`` (the numpy
-    draw of the shape ids and lengths), and implement ``_after_scoring``, ``_task_info``,
+    Subclasses set ``SHAPE_SET``, ``MAX_ELEMENTS``, ``SIZE_BEFORE_CENTRE`` and
+    ``_sample_element_shapes`` (the torch draw of the shape ids and lengths), and implement ``_after_scoring``, ``_task_info``,
     ``_privileged_obs``, ``compute_dense_reward`` and ``_terminated``.
     """
 
@@ -105,6 +105,8 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     SHAPE_SET: ClassVar[tuple[int, ...]] = (SHAPE_CIRCLE,)
     # Elements per episode buffer (TraceShape 1, TraceShapeSeq 5).
     MAX_ELEMENTS: ClassVar[int] = 1
+    # Whether the sizes are drawn before the centre (TraceShape) or after it (TraceShapeSeq).
+    SIZE_BEFORE_CENTRE: ClassVar[bool] = True
     CUBE_HALFSIZE: ClassVar[float] = CUBE_HALF_SIZE
     RED_CUBE_RGBA: ClassVar[tuple[int, int, int, int]] = (220, 50, 50, 255)
     GREEN_CUBE_RGBA: ClassVar[tuple[int, int, int, int]] = (50, 220, 50, 255)
@@ -127,6 +129,12 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     lamp: ColorSwitchLamp
 
     GPU_MEMORY: ClassVar[dict[str, int]] = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
+    TASK_STATE = (
+        "shape_centre", "shape_sizes", "shape_rotations", "_element_shapes", "_element_count",
+        "_element_waypoints", "_element_checkpoints", "_element_visited", "_active_element",
+        "pre_demo_steps_per_env", "demo_steps_per_env", "_red_cube_shown", "_last_scored_step", "lamp",
+        "_cube_position", "_tcp_position", "_progress",
+    )
 
     # ---------------------------------------------------------------- scene
     def _load_scene(self, options: dict) -> None:
@@ -162,24 +170,34 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         return builder.build_kinematic(name="red_cube")
 
     # ------------------------------------------------------------- episodes
-    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-        """Numpy draws per reset env: ((b, E) shape ids padded with −1, (b,) element counts)."""
+    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Torch draws for the reset envs: ((b, E) shape ids padded with −1, (b,) counts)."""
         raise NotImplementedError
 
+    def _draw_shape_ids(self, shape: tuple[int, ...]) -> torch.Tensor:
+        """Shape ids of the given batch shape, uniform over ``SHAPE_SET`` (one torch draw)."""
+        index = torch.randint(0, len(self.SHAPE_SET), shape, device=self.device)
+        return torch.as_tensor(self.SHAPE_SET, dtype=torch.long, device=self.device)[index]
+
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        # Draw order: the shapes (numpy, per env RNG), then torch: centre x, centre y, the
-        # sizes and rotations of all E elements.
-        shapes, counts = self._sample_element_shapes(env_idx)
+        # Torch draws only (no numpy draw before the arm noise), in the reference's order (its
+        # seed-0 resets reproduced): TraceShape: the shape, the size, centre x, centre y, the
+        # rotation; TraceShapeSeq: L, the L shapes, centre x, centre y, the sizes of all E
+        # elements, their rotations.
         b, e, dev = len(env_idx), self.MAX_ELEMENTS, self.device
-        shapes_t = torch.as_tensor(shapes, dtype=torch.long, device=dev)
-        self._element_shapes[env_idx] = shapes_t
-        self._element_count[env_idx] = torch.as_tensor(counts, dtype=torch.long, device=dev)
         (x_lo, x_hi), (y_lo, y_hi), (r_lo, r_hi) = self.CENTER_X_RANGE, self.CENTER_Y_RANGE, self.SIZE_RANGE
+        shapes_t, counts = self._sample_element_shapes(env_idx)
+        sizes = None
+        if self.SIZE_BEFORE_CENTRE:
+            sizes = r_lo + (r_hi - r_lo) * torch.rand(b, e, device=dev)
+        self._element_shapes[env_idx] = shapes_t
+        self._element_count[env_idx] = counts
         centre = torch.stack(
             [x_lo + (x_hi - x_lo) * torch.rand(b, device=dev), y_lo + (y_hi - y_lo) * torch.rand(b, device=dev)],
             dim=-1,
         )
-        sizes = r_lo + (r_hi - r_lo) * torch.rand(b, e, device=dev)
+        if sizes is None:
+            sizes = r_lo + (r_hi - r_lo) * torch.rand(b, e, device=dev)
         rotations = 2 * math.pi * torch.rand(b, e, device=dev)
         self.shape_centre[env_idx] = centre
         self.shape_sizes[env_idx] = sizes

@@ -125,6 +125,12 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         super().__init__(*args, **kwargs)
 
     GPU_MEMORY: ClassVar[dict[str, int]] = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
+    TASK_STATE = (
+        "button", "confirm_button", "blink_lamp", "phase_lamp", "target_blinks", "blink_start_steps",
+        "blink_on_schedule", "blink_off_schedule", "latch", "press_count", "raw_press_count",
+        "confirm_press_ready", "submit_attempted", "submit_success", "failed", "_events", "_advanced_at",
+        "_tcp_raw_pose", "_tcp_position",
+    )
 
     @property
     def max_blinks(self) -> int:
@@ -177,14 +183,15 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
 
     # -------------------------------------------------------------- episodes
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        # The answer N from each env's numpy episode RNG, then the layout (torch).
-        lo, hi = self.BLINK_COUNT_RANGE
-        counts = [int(self._batched_episode_rng[int(i)].randint(lo, hi + 1)) for i in env_idx.cpu().numpy()]
-        self.target_blinks[env_idx] = torch.as_tensor(counts, dtype=torch.int64, device=self.device)
-        self.oracle_info = self.target_blinks.to(torch.uint8)
+        # Torch draws only, as the reference (its seed-0 reset reproduced; no numpy draw before
+        # the arm noise): the red button's x, y for the reset envs, then the answer N; the blink
+        # schedule follows in _sample_phase_lengths.
         b = len(env_idx)
         (x_lo, x_hi), (y_lo, y_hi) = self.BUTTON_X_RANGE, self.BUTTON_Y_RANGE
         xy = torch.rand(b, 2, device=self.device)
+        lo, hi = self.BLINK_COUNT_RANGE
+        self.target_blinks[env_idx] = torch.randint(lo, hi + 1, (b,), device=self.device)
+        self.oracle_info = self.target_blinks.to(torch.uint8)
         xy[:, 0] = x_lo + (x_hi - x_lo) * xy[:, 0]
         xy[:, 1] = y_lo + (y_hi - y_lo) * xy[:, 1]
         self.button.place(env_idx, xy)
@@ -201,12 +208,15 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         return button_xy + torch.tensor(offset, device=button_xy.device)
 
     def _sample_phase_lengths(self, env_idx: torch.Tensor) -> None:
-        # The cue is the blink schedule (torch): the pre-blink dark steps P for all reset
-        # envs, then max_blinks dark times per env (entries past N unused).
+        # The cue is the blink schedule (torch, as the reference): the pre-blink dark steps P
+        # for all reset envs, then max_blinks "on" lengths per env (a draw from the one-value
+        # range [3, 3], so always BLINK_ON_STEPS), then max_blinks dark times per env (entries
+        # past N unused).
         b, k = len(env_idx), self.max_blinks
         p_lo, p_hi = self.PRE_BLINK_STEPS
         off_lo, off_hi = self.BLINK_OFF_STEPS
         pre = torch.randint(p_lo, p_hi + 1, (b,), device=self.device)
+        torch.randint(self.BLINK_ON_STEPS, self.BLINK_ON_STEPS + 1, (b, k), device=self.device)
         off = torch.randint(off_lo, off_hi + 1, (b, k), device=self.device)
         used = torch.arange(k, device=self.device) < self.target_blinks[env_idx, None]
         on = torch.where(used, self.BLINK_ON_STEPS, 0)

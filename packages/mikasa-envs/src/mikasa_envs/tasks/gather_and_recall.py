@@ -97,6 +97,10 @@ class GatherAndRecallVLABaseEnv(LampTaskVLABaseEnv):
     disc: Actor
     buttons: list[Button]
     lamp: ColorSwitchLamp
+    TASK_STATE = (
+        "disc_xy", "flash_trigger_count", "flash_duration", "flash_color", "cubes_on_disc", "flash_triggered",
+        "flash_start", "pressed_button", "success_latch", "failed", "buttons", "lamp",
+    )
 
     GPU_MEMORY: ClassVar[dict[str, int]] = {
         "found_lost_pairs_capacity": 2**25,
@@ -150,16 +154,18 @@ class GatherAndRecallVLABaseEnv(LampTaskVLABaseEnv):
 
     # ------------------------------------------------------------- episodes
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        # Torch draws, in this order: disc x, disc y, cube jitter (b, N, 2), trigger count K,
-        # flash length F, flash colour.
+        # Torch draws, in this order: trigger count K, flash length F, flash colour, disc x,
+        # disc y, cube jitter (b, N, 2). The reference's seed-0 resets put the disc and the
+        # jitter after three draws; the order of K, F and the colour among them is not visible
+        # at reset (the spec's order).
         b, n, dev = len(env_idx), self.N_CUBES, self.device
-        dx = uniform(b, *self.DISC_X_RANGE, dev)
-        dy = uniform(b, *self.DISC_Y_RANGE, dev)
-        jitter = (torch.rand(b, n, 2, device=dev) * 2 - 1) * self.CLUSTER_JITTER
         self.flash_trigger_count[env_idx] = torch.randint(1, max(2, n), (b,), device=dev)
         self.flash_duration[env_idx] = torch.randint(self.FLASH_STEPS[0], self.FLASH_STEPS[1] + 1, (b,), device=dev)
         self.flash_color[env_idx] = torch.randint(0, len(RGB_COLORS), (b,), device=dev)
         self.oracle_info[env_idx] = self.flash_color[env_idx].to(torch.uint8)
+        dx = uniform(b, *self.DISC_X_RANGE, dev)
+        dy = uniform(b, *self.DISC_Y_RANGE, dev)
+        jitter = (torch.rand(b, n, 2, device=dev) * 2 - 1) * self.CLUSTER_JITTER
 
         disc_xy = torch.stack([dx, dy], dim=-1)
         self.disc_xy[env_idx] = disc_xy

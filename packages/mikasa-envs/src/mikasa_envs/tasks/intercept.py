@@ -38,6 +38,7 @@ class InterceptVLABaseEnv(InterceptBallVLABaseEnv):
     # the goal; closer than REACHED_DIST latches ``reached_status``.
     HIT_OFFSET: ClassVar[float] = 0.05
     REACHED_DIST: ClassVar[float] = 0.04
+    TASK_STATE = ("goal_pos", "reached_status", "ball_touched")
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)

@@ -43,6 +43,7 @@ class ShellGamePickVLAEnv(GoalSiteMixin, HiddenBallShellGameVLABaseEnv):
     # Sum of both finger joints when fully open.
     GRIPPER_OPEN_WIDTH: ClassVar[float] = 0.08
     DENSE_REWARD_MAX = 75.0
+    TASK_STATE = ("_target_mug_pose",)
 
     def _load_task_objects(self) -> None:
         super()._load_task_objects()

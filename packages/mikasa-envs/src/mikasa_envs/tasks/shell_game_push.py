@@ -34,6 +34,7 @@ class ShellGamePushVLAEnv(GoalSiteMixin, HiddenBallShellGameVLABaseEnv):
     REACHED_THRESH: ClassVar[float] = 0.08
     STATIC_QVEL_THRESH = 0.3
     DENSE_REWARD_MAX = 4.0
+    TASK_STATE = ("_target_mug_pose",)
 
     def _load_task_objects(self) -> None:
         super()._load_task_objects()

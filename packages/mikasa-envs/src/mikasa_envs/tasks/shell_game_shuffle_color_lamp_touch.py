@@ -4,7 +4,7 @@ shuffle, then touch the cup the lamp's colour names."""
 from __future__ import annotations
 
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv
+from mikasa_envs.tasks._shell_game import SHUFFLE_TASK_STATE, ColorLampShellGameVLABaseEnv
 
 
 class ShellGameShuffleColorLampTouchVLABaseEnv(ColorLampShellGameVLABaseEnv):
@@ -30,6 +30,7 @@ class ShellGameShuffleColorLampTouchVLABaseEnv(ColorLampShellGameVLABaseEnv):
     )
     SHUFFLE_STEPS = (20, 35)
     NUM_SWAPS = (2, 4)
+    TASK_STATE = SHUFFLE_TASK_STATE
     # Upstream declares it but never uses it (the lamp is the colour-switch lamp).
     LAMP_RADIUS = 0.018
 

@@ -6,7 +6,12 @@ import torch
 from mani_skill.utils.structs import Actor
 
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import RedBallMixin, ScriptedShellGameVLABaseEnv, TouchMugMixin
+from mikasa_envs.tasks._shell_game import (
+    SHUFFLE_TASK_STATE,
+    RedBallMixin,
+    ScriptedShellGameVLABaseEnv,
+    TouchMugMixin,
+)
 
 
 class ShellGameShuffleTouchVLABaseEnv(TouchMugMixin, RedBallMixin, ScriptedShellGameVLABaseEnv):
@@ -30,6 +35,7 @@ class ShellGameShuffleTouchVLABaseEnv(TouchMugMixin, RedBallMixin, ScriptedShell
     )
     SHUFFLE_STEPS = (20, 35)
     NUM_SWAPS = (2, 4)
+    TASK_STATE = SHUFFLE_TASK_STATE
 
     def _scripted_balls(self) -> list[Actor]:
         return [self.red_ball]

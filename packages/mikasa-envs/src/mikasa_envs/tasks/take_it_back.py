@@ -23,6 +23,8 @@ from mikasa_envs.tasks._intercept import SMALL_SCENE_GPU_MEMORY
 
 CUBE_GREEN_255 = (0, 255, 0, 255)
 START_MARKER_BLUE_255 = (0, 0, 255, 255)
+# The start spot's rows j (y = START_Y_STEP·j + jitter).
+START_ROWS = (-1, 0, 1)
 GOAL_RED_255 = (194, 19, 22, 255)
 GOAL_CHANGED_PURPLE_255 = (147, 0, 211, 255)
 
@@ -67,6 +69,7 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
     cube: Actor
 
     GPU_MEMORY: ClassVar[dict[str, int]] = SMALL_SCENE_GPU_MEMORY
+    TASK_STATE = ("initial_pos", "goal_pos", "goal_achieved", "goal_reached_status", "goal")
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)
@@ -94,12 +97,15 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         self.goal_reached_status = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        # Torch draws, in order: the start's x, its row j, its y jitter; the goal's x, y.
+        # As the reference (its seed-0 reset reproduced): the start's row j ~ U{−1, 0, 1} from
+        # each env's numpy episode RNG (before the arm noise, common.md §11); then torch: the
+        # start's x, its y jitter, the goal's x, y.
         b = len(env_idx)
+        rows = self._batched_episode_rng[env_idx.cpu().numpy()].choice(START_ROWS)
+        row = torch.as_tensor(rows, dtype=torch.float32, device=self.device)
         (x_lo, x_hi), (gx_lo, gx_hi), (gy_lo, gy_hi) = self.START_X, self.GOAL_X, self.GOAL_Y
         start = torch.zeros(b, 3, device=self.device)
         start[:, 0] = torch.rand(b) * (x_hi - x_lo) + x_lo
-        row = torch.randint(-1, 2, (b,)).float()
         start[:, 1] = self.START_Y_STEP * row + torch.rand(b) * self.START_Y_JITTER
         start[:, 2] = TARGET_Z
         goal = torch.zeros(b, 3, device=self.device)

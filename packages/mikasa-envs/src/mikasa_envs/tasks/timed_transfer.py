@@ -74,6 +74,18 @@ class TimedTransferVLABaseEnv(LampTaskVLABaseEnv):
     blue_cube: Actor
     lamp: ColorSwitchLamp
 
+    TASK_STATE = (
+        "signal_step",
+        "window_start",
+        "window_end",
+        "green_disc_center",
+        "red_disc_center",
+        "too_early",
+        "success_latch",
+        "failed",
+        "lamp",
+    )
+
     def __init_subclass__(cls, **kwargs: Any) -> None:
         # One instruction per variant: the template with this variant's delay (the manifest's).
         super().__init_subclass__(**kwargs)

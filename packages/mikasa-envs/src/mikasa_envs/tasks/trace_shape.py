@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import torch
 
 from mikasa_envs.registration import register_task
@@ -63,9 +62,10 @@ class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
         return self._element_visited[:, 0]
 
     # ------------------------------------------------------------- episodes
-    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-        shapes = self._batched_episode_rng[env_idx.cpu().numpy()].choice(np.array(self.SHAPE_SET))
-        return np.asarray(shapes, dtype=np.int64).reshape(-1, 1), np.ones(len(env_idx), dtype=np.int64)
+    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        b = len(env_idx)
+        shapes = self._draw_shape_ids((b, 1))
+        return shapes, torch.ones(b, dtype=torch.long, device=self.device)
 
     def _oracle_info_now(self) -> torch.Tensor:
         return self.shape_type.to(torch.uint8)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
 import torch
 
 from mikasa_envs.building_blocks.buttons import (
@@ -52,6 +51,7 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     )
     DENSE_REWARD_MAX = 40.0
     MAX_ELEMENTS = 5
+    SIZE_BEFORE_CENTRE = False
     SEQUENCE_LEN_RANGE: ClassVar[tuple[int, int]] = (2, 5)
     CUE_PHASE_STEPS = (3 + 2 * NUM_WAYPOINTS, 8 + 5 * NUM_WAYPOINTS)
     # Submit button: base box, cap cylinder, colours, offset from the lamp, press radius (XY).
@@ -64,6 +64,10 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     # Where the reward's button-reach term aims the TCP: (button XY, this height).
     BUTTON_REACH_Z: ClassVar[float] = 0.063
     FAILED_SUBMIT_REWARD: ClassVar[float] = -2.0
+    TASK_STATE = (
+        "button", "shape_closed", "_in_sequence", "press_ready", "button_pressed", "submit_success_latched",
+        "_submitted", "_successful_submit",
+    )
 
     button: Button
     button_top_z: float = BUTTON_TOP_Z
@@ -123,16 +127,17 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
         return self.button.xy
 
     # ------------------------------------------------------------- episodes
-    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-        # Per env (numpy): L, then all five shapes (those beyond L become padding).
+    def _sample_element_shapes(self, env_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        # Torch: L for the reset envs, then the shapes of the first max(L) elements (one env:
+        # its L shapes, as the reference); shapes beyond an env's L become padding.
+        b, dev = len(env_idx), self.device
         lo, hi = self.SEQUENCE_LEN_RANGE
-        shapes = np.full((len(env_idx), self.MAX_ELEMENTS), PADDING_SHAPE, dtype=np.int64)
-        counts = np.zeros(len(env_idx), dtype=np.int64)
-        for row, i in enumerate(env_idx.cpu().numpy()):
-            rng = self._batched_episode_rng[int(i)]
-            counts[row] = rng.randint(lo, hi + 1)
-            drawn = rng.choice(np.array(self.SHAPE_SET), size=self.MAX_ELEMENTS)
-            shapes[row, : counts[row]] = drawn[: counts[row]]
+        counts = torch.randint(lo, hi + 1, (b,), device=dev)
+        longest = int(counts.max())
+        shapes = torch.full((b, self.MAX_ELEMENTS), PADDING_SHAPE, dtype=torch.long, device=dev)
+        drawn = self._draw_shape_ids((b, longest))
+        in_sequence = torch.arange(longest, device=dev) < counts[:, None]
+        shapes[:, :longest] = torch.where(in_sequence, drawn, PADDING_SHAPE)
         return shapes, counts
 
     def _place_fixtures(self, env_idx: torch.Tensor, centre: torch.Tensor) -> None:
