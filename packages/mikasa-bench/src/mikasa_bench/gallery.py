@@ -335,7 +335,7 @@ def add_gallery_parser(sub: Any) -> argparse.ArgumentParser:
         action="append",
         default=None,
         metavar="ENV_ID",
-        help="an env id (repeatable; default: every registered task)",
+        help="an env id (repeatable; default: the 90 canonical tasks)",
     )
     sel.add_argument(
         "--split", default=None, help=f"the tasks of one split: {', '.join(SUPPORTED_SPLITS)}"
