@@ -202,6 +202,18 @@ def test_two_workers_write_what_one_worker_writes(tmp_path):
     assert tree(tmp_path / "two" / "data") == files
 
 
+def test_several_tasks_in_one_command_write_what_each_alone_writes(reference, tmp_path, capsys):
+    other, other_name = "FindImposterColor3-VLA-v0", "find_imposter_color_3_vla_v0"
+    with chdir(tmp_path / "both"):
+        argv = ["--env-id", ENV_ID, "--env-id", other, "--num-episodes", str(N), "--out", "data"]
+        assert main([*argv, "--no-progress"]) == 0
+    assert "2/2 task(s) complete: 6 new episode(s)" in capsys.readouterr().out
+    run(tmp_path / "alone", other)
+    both = tree(tmp_path / "both" / "data")
+    assert {k: v for k, v in both.items() if NAME in k} == tree(reference / "data")
+    assert {k: v for k, v in both.items() if other_name in k} == tree(tmp_path / "alone" / "data")
+
+
 class _FakeRunner:
     """Stands in for the simulator: seeds 1, 4, 7, ... fail, the others give a synthetic
     12-step episode that records its seed."""
@@ -296,6 +308,11 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
         (["--env-id", ENV_ID, "--max-attempts", "0"], "must be >= 1"),
         (["--env-id", ENV_ID, "--start-seed", "-1"], "must be >= 0"),
         (["--env-id", ENV_ID, "--obs-mode", "state"], "unrecognized arguments: --obs-mode"),
+        (["--env-id", ENV_ID, "--env-id", ENV_ID], "--env-id given more than once: " + ENV_ID),
+        (["--env-id", ENV_ID, "--env-id", "RememberColour3-VLA-v0"], "Did you mean: RememberColor3-VLA-v0"),
+        (["--env-id", ENV_ID, "--split", "short"], "not allowed with argument"),
+        (["--split", "tiny"], "invalid choice: 'tiny'"),
+        ([], "one of the arguments --env-id --split is required"),
     ],
 )
 def test_bad_input_exits_2(tmp_path, capsys, argv, fragment):

@@ -73,6 +73,8 @@ __all__ = [
 
 DEFAULT_NUM_EPISODES = 250
 """Episodes per task in the released data (spec §4)."""
+SPLITS = ("short", "medium", "long", "all")
+"""``--split`` values: the manifest's horizon splits, or all 90 canonical tasks."""
 DEFAULT_OUT = "data_mikasa_robo"
 """Dataset root (spec §2)."""
 DEFAULT_START_SEED = 0
@@ -738,7 +740,19 @@ def build_parser() -> argparse.ArgumentParser:
             "normalized_dense. Re-running the same command resumes an interrupted collection."
         ),
     )
-    p.add_argument("--env-id", required=True, help="task id, e.g. RememberColor3-VLA-v0")
+    tasks = p.add_mutually_exclusive_group(required=True)
+    tasks.add_argument(
+        "--env-id",
+        action="append",
+        default=None,
+        help="task id, e.g. RememberColor3-VLA-v0 (repeatable: the tasks are collected one after another)",
+    )
+    tasks.add_argument(
+        "--split",
+        choices=SPLITS,
+        default=None,
+        help="every canonical task of a split (all: the 90 of the published dataset)",
+    )
     p.add_argument(
         "--num-episodes",
         "--num-train-data",
@@ -783,38 +797,77 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def selected_env_ids(env_ids: Sequence[str] | None, split: str | None) -> list[str]:
+    """The tasks of ``--env-id`` (in the given order, no repeats) or of ``--split`` (manifest
+    order), each checked with :func:`resolve_task` before anything is collected."""
+    if split is not None:
+        from mikasa_envs.manifest import list_tasks
+
+        env_ids = [t.env_id for t in list_tasks(split=None if split == "all" else split)]
+    env_ids = list(env_ids or [])
+    repeated = sorted({e for e in env_ids if env_ids.count(e) > 1})
+    if repeated:
+        raise CollectError(f"--env-id given more than once: {', '.join(repeated)}")
+    for env_id in env_ids:
+        resolve_task(env_id)
+    return env_ids
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console entry point; returns the exit status (0 ok, 1 failed, 2 bad input, 130 Ctrl-C)."""
+    """Console entry point; returns the exit status (0 ok, 1 failed, 2 bad input, 130 Ctrl-C).
+
+    Several tasks are collected one after another, each into its own dataset directory; a
+    task whose collection fails does not stop the others (exit status 1 at the end)."""
     parser = build_parser()
     args = parser.parse_args(argv)  # exits with status 2 on malformed arguments
     logging.getLogger("mani_skill").setLevel(logging.ERROR)
     try:
-        summary = collect(
-            args.env_id,
-            args.num_episodes,
-            args.out,
-            workers=args.workers,
-            start_seed=args.start_seed,
-            max_attempts=args.max_attempts,
-            min_episode_length=args.min_episode_length,
-            progress=not args.no_progress,
-            log_attempts=args.log_attempts,
-        )
+        env_ids = selected_env_ids(args.env_id, args.split)
     except CollectError as exc:
         print(f"mikasa-collect: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except CollectionFailed as exc:
-        print(f"mikasa-collect: collection failed: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-    except KeyboardInterrupt:
+    failed: list[str] = []
+    summaries: list[CollectionSummary] = []
+    for k, env_id in enumerate(env_ids, 1):
+        if len(env_ids) > 1:
+            print(f"[{k}/{len(env_ids)}] {env_id}", file=sys.stderr, flush=True)
+        try:
+            summary = collect(
+                env_id,
+                args.num_episodes,
+                args.out,
+                workers=args.workers,
+                start_seed=args.start_seed,
+                max_attempts=args.max_attempts,
+                min_episode_length=args.min_episode_length,
+                progress=not args.no_progress,
+                log_attempts=args.log_attempts,
+            )
+        except CollectError as exc:
+            print(f"mikasa-collect: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        except CollectionFailed as exc:
+            print(f"mikasa-collect: collection failed: {exc}", file=sys.stderr)
+            failed.append(env_id)
+            continue
+        except KeyboardInterrupt:
+            print(
+                "mikasa-collect: interrupted; the episodes saved so far are kept — rerun the same "
+                "command to continue",
+                file=sys.stderr,
+            )
+            return EXIT_INTERRUPTED
+        summaries.append(summary)
+        print(summary.format(), flush=True)
+    if len(env_ids) > 1:
+        new = sum(s.new_episodes for s in summaries)
+        frames = sum(s.frames for s in summaries)
+        wall = sum(s.wall_s for s in summaries)
         print(
-            "mikasa-collect: interrupted; the episodes saved so far are kept — rerun the same "
-            "command to continue",
-            file=sys.stderr,
+            f"{len(summaries)}/{len(env_ids)} task(s) complete: {new} new episode(s), {frames} frames "
+            f"in {wall:.1f} s" + (f"; failed: {', '.join(failed)}" if failed else "")
         )
-        return EXIT_INTERRUPTED
-    print(summary.format())
-    return EXIT_OK
+    return EXIT_FAILED if failed else EXIT_OK
 
 
 if __name__ == "__main__":
