@@ -348,3 +348,13 @@ def test_console_script_reports_bad_input():
     )
     assert proc.returncode == 2
     assert "--num-episodes" in proc.stderr and "must be >= 1, got 0" in proc.stderr
+
+
+def test_split_selects_the_manifests_tasks_in_order():
+    from mikasa_envs.manifest import list_tasks
+    from mikasa_oracles.collect import selected_env_ids
+
+    assert selected_env_ids(None, "all") == [t.env_id for t in list_tasks()]
+    short = selected_env_ids(None, "short")
+    assert short == [t.env_id for t in list_tasks(split="short")] and 0 < len(short) < 90
+    assert selected_env_ids([ENV_ID, "ShellGameTouch-VLA-v0"], None) == [ENV_ID, "ShellGameTouch-VLA-v0"]
