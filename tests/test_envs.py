@@ -10,19 +10,12 @@ import torch
 from conftest import CANONICAL_IDS, REGISTERED_IDS
 from mikasa_envs import get_task
 from mikasa_envs.base_env import MikasaVLABaseEnv
+from mikasa_envs.manifest import SELECTION_FAMILIES
 from mikasa_wrappers import apply_mikasa_vla_wrappers
 
 # Keys every task's info carries, and the ones the six selection families add (common.md §6).
 INFO_KEYS = {"elapsed_steps", "success", "task_cue", "language_instruction", "oracle_info", "reward_dict"}
 SELECTION_INFO_KEYS = INFO_KEYS | {"obj_to_goal_pos", "is_obj_placed", "is_robot_static"}
-SELECTION_FAMILIES = {
-    "remember_color",
-    "remember_shape",
-    "remember_shape_and_color",
-    "find_imposter_color",
-    "find_imposter_shape",
-    "find_imposter_shape_and_color",
-}
 
 
 def _matches_instruction(instruction: str, env_id: str) -> bool:

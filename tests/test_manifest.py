@@ -69,3 +69,9 @@ def test_registered_horizons_equal_manifest():
         assert REGISTERED_ENVS[env_id].max_episode_steps == task.max_episode_steps
         assert gym.spec(env_id).max_episode_steps == task.max_episode_steps
         assert REGISTERED_ENVS[env_id].cls.LANGUAGE_INSTRUCTION == task.language_instruction
+
+
+def test_family_groups_name_manifest_families():
+    from mikasa_envs.manifest import SELECTION_FAMILIES, SHELL_GAME_FAMILIES, families
+
+    assert set(SELECTION_FAMILIES) | set(SHELL_GAME_FAMILIES) <= set(families())

@@ -72,22 +72,6 @@ TAKE_IT_BACK_RADIUS = 0.08
 # 427-430 for 3; the memoryless oracle's cycles took 79-88 steps on Easy-3).
 BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_checker_hard": 143}
 
-_SHELL_GAMES = (
-    "shell_game_touch",
-    "shell_game_push",
-    "shell_game_pick",
-    "shell_game_shuffle_touch",
-    "shell_game_color_lamp_touch",
-    "shell_game_shuffle_color_lamp_touch",
-)
-_SELECTION = (
-    "remember_color",
-    "remember_shape",
-    "remember_shape_and_color",
-    "find_imposter_color",
-    "find_imposter_shape",
-    "find_imposter_shape_and_color",
-)
 
 
 def _variant(env_id: str, family_prefix: str) -> str:
@@ -152,15 +136,15 @@ def coupon_chance(n: int, draws: int) -> float:
 
 def task_chance(env_id: str) -> Chance:
     """The chance success rate of ``env_id`` (a manifest id) and its one-line reason."""
-    from mikasa_envs.manifest import get_task
+    from mikasa_envs.manifest import SELECTION_FAMILIES, SHELL_GAME_FAMILIES, get_task
 
     task = get_task(env_id)
     family = task.family
-    if family in _SELECTION:
+    if family in SELECTION_FAMILIES:
         n = _selection_candidates(env_id)
         which = "find the imposter among" if family.startswith("find") else "the shown one is one of"
         return Chance(1 / n, f"1/{n}: {which} the {n} objects on the table in the action phase")
-    if family in _SHELL_GAMES:
+    if family in SHELL_GAME_FAMILIES:
         return Chance(1 / 3, "1/3: the ball's mug is one of 3 mugs")
     if family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors"):
         length = _sequence_length(env_id)

@@ -18,9 +18,9 @@ file is written under a temporary name and renamed.
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import math
-import os
 import re
 import sys
 import time
@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 
 from .gallery_html import write_index
+from .protocol import BenchmarkConfig
+from .results import _atomic_write_bytes, atomic_write_json
 
 __all__ = [
     "PHASE_COLORS",
@@ -52,6 +54,8 @@ PHASE_COLORS: dict[str, tuple[int, int, int]] = {
 """Label colour (RGB) of each phase in the animation and on the page."""
 
 _STRIP_H = 22
+GALLERY_CONFIG = BenchmarkConfig(sim_backend="cpu")
+"""The canonical env (rgb, default render device) on the CPU sim, one per worker."""
 _SECTION = re.compile(r"\*\*(?P<name>[A-Za-z ]+):\*\*")
 
 
@@ -140,9 +144,9 @@ def write_animation(path: Path, frames: Sequence[np.ndarray], strides: Sequence[
     images = [Image.fromarray(f) for f in frames]
     durations = [max(100, round(1000 * s / 30)) for s in strides]
     durations[-1] = 1500
-    tmp = path.with_name(f".{path.name}.tmp")
+    encoded = io.BytesIO()
     images[0].save(
-        tmp,
+        encoded,
         format="WEBP",
         save_all=True,
         append_images=images[1:],
@@ -151,7 +155,7 @@ def write_animation(path: Path, frames: Sequence[np.ndarray], strides: Sequence[
         quality=80,
         method=4,
     )
-    os.replace(tmp, path)
+    _atomic_write_bytes(path, encoded.getvalue())
 
 
 def _docstring_sections(cls: type) -> dict[str, str]:
@@ -215,12 +219,11 @@ def render_task(
     """Run the oracle for one episode of ``env_id`` and write its animation and card; returns the card."""
     from .episode import make_benchmark_env, run_episode
     from .policies import build_policy, resolve_policy
-    from .protocol import BenchmarkConfig
 
     tasks_dir = Path(out_dir) / "tasks"
     tasks_dir.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    env = make_benchmark_env(env_id, BenchmarkConfig(sim_backend="cpu"))
+    env = make_benchmark_env(env_id, GALLERY_CONFIG)
     try:
         recorder = FrameRecorder(env, max_frames)
         policy = build_policy(resolve_policy("oracle"), env, env_id)
@@ -241,23 +244,17 @@ def render_task(
         "seconds": round(time.perf_counter() - started, 1),
     }
     card["image"] = f"tasks/{env_id}.webp"
-    _write_json(tasks_dir / f"{env_id}.json", card)
+    atomic_write_json(tasks_dir / f"{env_id}.json", card)
     return card
 
 
-def _write_json(path: Path, data: Any) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
+def _init_worker(worker_config: BenchmarkConfig, n_workers: int) -> None:
+    """Each worker renders as the bench's pool workers do (`worker_env_vars`: its device,
+    its share of the cores)."""
+    from .executor import worker_env_vars
+    from .render import apply_environment
 
-
-def _init_worker(n_workers: int) -> None:
-    """Each worker renders with its share of the cores (`mikasa_bench.render`)."""
-    from .executor import available_cores
-    from .render import apply_environment, worker_environment
-
-    share = available_cores() // max(1, n_workers)
-    apply_environment(worker_environment("auto", lp_threads=share if share > 1 else 0))
+    apply_environment(worker_env_vars(worker_config, 0, n_workers))
 
 
 def build_gallery(
@@ -288,7 +285,7 @@ def build_gallery(
         n = min(workers, len(todo))
         ctx = get_context("spawn")  # SAPIEN and fork do not mix
         with ProcessPoolExecutor(
-            n, mp_context=ctx, initializer=_init_worker, initargs=(n,)
+            n, mp_context=ctx, initializer=_init_worker, initargs=(GALLERY_CONFIG, n)
         ) as pool:
             futures = {pool.submit(render_task, e, out, seed, scale, max_frames): e for e in todo}
             for done, future in enumerate(as_completed(futures), 1):
@@ -312,7 +309,7 @@ def build_gallery(
         (out / "tasks").glob("*.json"), key=lambda p: (order.get(p.stem, len(order)), p.stem)
     )
     cards = {p.stem: json.loads(p.read_text()) for p in paths}
-    _write_json(out / "gallery.json", {"tasks": list(cards.values())})
+    atomic_write_json(out / "gallery.json", {"tasks": list(cards.values())})
     write_index(out / "index.html", list(cards.values()), PHASE_COLORS)
     return [cards[e] for e in env_ids]
 

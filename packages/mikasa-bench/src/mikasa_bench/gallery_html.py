@@ -6,10 +6,11 @@ headless browser can check the page as a person would see it."""
 from __future__ import annotations
 
 import html
-import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+from .results import _atomic_write_bytes
 
 __all__ = ["write_index"]
 
@@ -98,7 +99,4 @@ def write_index(
         "<p id='image-status' data-loaded='0' data-total='0'>Loading animations...</p>"
         f"{sections}<script>{_CHECK_SCRIPT}</script></body></html>\n"
     )
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, path)
+    _atomic_write_bytes(path, page.encode("utf-8"))

@@ -66,11 +66,12 @@ from mikasa_datasets.loaders import (
     DatasetFormatError,
     commit_output,
     new_staging_dir,
+    npz_task_files,
     output_action,
     remove_stale_staging,
 )
 from mikasa_datasets.naming import env_id_to_dataset_name
-from mikasa_datasets.npz import EpisodeFormatError, list_episode_files, read_episode, read_metadata
+from mikasa_datasets.npz import EpisodeFormatError, read_episode, read_metadata
 from mikasa_datasets.rlds import ConversionResult
 
 __all__ = [
@@ -558,13 +559,7 @@ def convert_npz_to_lerobot(
     depend on it, only how they are split into files and lerobot's combined quantiles.
     """
     src = Path(npz_task_dir)
-    if not src.is_dir():
-        raise DatasetFormatError(src, "NPZ task directory does not exist")
-    files = list_episode_files(src)
-    if not files:
-        raise DatasetFormatError(src, "no train_data_<i>.npz episode files")
-    if max_episodes is not None:
-        files = files[:max_episodes]
+    files = npz_task_files(src, max_episodes)
     meta_path = src / "metadata.json"
     env_id = str(read_metadata(src).get("env_id", src.name)) if meta_path.is_file() else src.name
 

@@ -76,6 +76,18 @@ class DatasetFormatError(ValueError):
         return type(self), (self.path, self.problem)
 
 
+def npz_task_files(npz_task_dir: str | os.PathLike[str], max_episodes: int | None = None) -> list[Path]:
+    """The ``train_data_<i>.npz`` files of an NPZ task directory in index order (the first
+    ``max_episodes`` of them); a missing or empty directory is a `DatasetFormatError`."""
+    src = Path(npz_task_dir)
+    if not src.is_dir():
+        raise DatasetFormatError(src, "NPZ task directory does not exist")
+    files = list_episode_files(src)
+    if not files:
+        raise DatasetFormatError(src, "no train_data_<i>.npz episode files")
+    return files if max_episodes is None else files[:max_episodes]
+
+
 class MissingDependencyError(ImportError):
     """An optional format library (tensorflow-datasets, lerobot, ...) is not installed."""
 

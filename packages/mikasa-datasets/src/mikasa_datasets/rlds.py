@@ -63,6 +63,7 @@ from mikasa_datasets.loaders import (
     DatasetFormatError,
     commit_output,
     new_staging_dir,
+    npz_task_files,
     output_action,
     remove_stale_staging,
     require,
@@ -71,7 +72,6 @@ from mikasa_datasets.naming import env_id_to_dataset_name
 from mikasa_datasets.npz import (
     EpisodeFormatError,
     fast_zlib,
-    list_episode_files,
     read_episode,
     read_metadata,
 )
@@ -483,19 +483,13 @@ def convert_npz_to_rlds(
     builder_class = _builder_class()  # imports TF first: not part of the conversion time
     t0 = time.perf_counter()
     src = Path(npz_task_dir)
-    if not src.is_dir():
-        raise DatasetFormatError(src, "NPZ task directory does not exist")
-    files = list_episode_files(src)
-    if not files:
-        raise DatasetFormatError(src, "no train_data_<i>.npz episode files")
+    files = npz_task_files(src, max_episodes)
     meta_path = src / "metadata.json"
     if not meta_path.is_file():
         raise DatasetFormatError(
             meta_path, "missing; every NPZ task directory has a metadata.json (spec §3.4)"
         )
     meta = read_metadata(src)
-    if max_episodes is not None:
-        files = files[:max_episodes]
     name = env_id_to_dataset_name(src.name)
     env_id = str(meta.get("env_id", name))
     final = Path(rlds_root) / name

@@ -27,6 +27,24 @@ MEMORY_TYPES: tuple[str, ...] = (
     "Checklist",
 )
 DATA_SOURCES: tuple[str, ...] = ("PPO", "MP")
+SELECTION_FAMILIES: tuple[str, ...] = (
+    "remember_color",
+    "remember_shape",
+    "remember_shape_and_color",
+    "find_imposter_color",
+    "find_imposter_shape",
+    "find_imposter_shape_and_color",
+)
+"""The six selection families (``tasks/_selection.py``): touch one of N objects."""
+SHELL_GAME_FAMILIES: tuple[str, ...] = (
+    "shell_game_touch",
+    "shell_game_push",
+    "shell_game_pick",
+    "shell_game_shuffle_touch",
+    "shell_game_color_lamp_touch",
+    "shell_game_shuffle_color_lamp_touch",
+)
+"""The six shell-game families (``tasks/_shell_game.py``): act on one of three mugs."""
 
 
 @dataclass(frozen=True)

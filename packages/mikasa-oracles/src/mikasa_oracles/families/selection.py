@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from mikasa_envs.manifest import SELECTION_FAMILIES
 
 from mikasa_oracles.controller import hold, move_towards, tilted
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
@@ -100,13 +101,6 @@ class MemorylessSelectionOracle(Memoryless, SelectionOracle):
         return int(on_table[self.guess(len(on_table))]) if len(on_table) else None
 
 
-FAMILIES = (
-    "remember_color",
-    "remember_shape",
-    "remember_shape_and_color",
-    "find_imposter_color",
-    "find_imposter_shape",
-    "find_imposter_shape_and_color",
-)
+FAMILIES = SELECTION_FAMILIES
 ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, SelectionOracle)
 MEMORYLESS_ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, MemorylessSelectionOracle)
