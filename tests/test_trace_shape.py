@@ -91,9 +91,14 @@ def test_timeline_lamp_and_demonstrator(make_env):
     pre, cue = int(base.pre_demo_steps_per_env[0]), int(base.cue_steps_per_env[0])
     assert 3 <= pre <= 8 and cue == pre + NUM_WAYPOINTS == pre + int(base.demo_steps_per_env[0])
     waypoints = base.waypoints[0]
-    centre = base.shape_centre[0]
+    centre = base.shape_centre[0].clone()
     np.testing.assert_allclose(base.green_cube.pose.p[0], [centre[0] - 0.16, centre[1], 0.02], atol=1e-5)
-    np.testing.assert_allclose(base.lamp.position[0], [centre[0] + 0.25, centre[1], 0.0], atol=1e-6)
+    # The lamp stands at a fixed spot: it does not show where the contour is (DEVIATIONS.md).
+    np.testing.assert_allclose(base.lamp.position[0], [0.2, 0.0, 0.0], atol=1e-6)
+    env.reset(seed=12)
+    assert not torch.allclose(base.shape_centre[0], centre)
+    np.testing.assert_allclose(base.lamp.position[0], [0.2, 0.0, 0.0], atol=1e-6)
+    _, info = env.reset(seed=11)
     seen = []
     for t in range(cue + 2):
         if t > 0:

@@ -47,6 +47,17 @@ def test_chance_parameters_match_the_env_classes():
             assert (cls.START_Y_STEP, cls.START_Y_JITTER) == (chance.TAKE_IT_BACK_ROW_STEP, chance.TAKE_IT_BACK_ROW_JITTER)
         elif family.startswith("batteries_checker"):
             assert f"-{cls.ACTIVE_BATTERIES}-VLA" in env_id
+        elif family == "trace_shape":
+            assert chance.TRACE_SHAPE_SETS[chance._variant(env_id, "TraceShape")] == cls.SHAPE_SET
+
+
+def test_trace_shape_chance_is_the_guess_rate_the_table_gives():
+    """The table's rates are what the Monte Carlo gives (fewer samples here: within 4 σ)."""
+    for variant in ("Easy", "Hard"):
+        rate = chance.trace_shape_guess_rate(chance.TRACE_SHAPE_SETS[variant], samples=20_000, seed=1)
+        expected = chance.TRACE_SHAPE_GUESS_RATES[variant]
+        assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 20_000) ** 0.5)
+    assert task_chance("TraceShapeEasy-VLA-v0").rate == pytest.approx(0.0597)
 
 
 def test_rotate_threshold_is_the_env_default():

@@ -7,9 +7,11 @@ than chance shows its answer without memory (a leak).
 * Tasks with a discrete answer: the success of a uniform guess among the candidates the
   agent sees when it must act (1/N objects, mugs, buttons or counts; 1/C(9, L) colour sets,
   1/P(9, L) colour sequences). For TakeItBack the candidates are the three start rows.
-* Tasks without a discrete answer, each justified in its reason: Intercept*, TraceShape*
-  (a continuous answer that is never seen without memory: chance 0, any success is a
-  leak), Rotate* (a continuous start heading: the success window's share of it),
+* Tasks without a discrete answer, each justified in its reason: Intercept*,
+  TraceShapeSeq* (a continuous answer that is never seen without memory: chance 0, any
+  success is a leak), TraceShape* (a contour guessed from the task's prior — shape, centre,
+  size, rotation — passes every checkpoint of the true one at a rate computed by
+  ``trace_shape_guess_rate``), Rotate* (a continuous start heading: the success window's share of it),
   TimedTransfer* (a time: the best a policy without a clock gets by descending with a
   constant probability per step), BatteriesChecker* (a checklist: the chance that
   uniformly drawn check cycles cover every battery within the horizon).
@@ -71,6 +73,10 @@ TAKE_IT_BACK_RADIUS = 0.08
 # the oracle, measured (Easy-3 / Easy-6: 247-248 / 502-504 steps for 3 / 6 cycles, Hard-3:
 # 427-430 for 3; the memoryless oracle's cycles took 79-88 steps on Easy-3).
 BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_checker_hard": 143}
+# TraceShape variant -> `trace_shape_guess_rate(SHAPE_SET)` (200,000 samples, seed 0; the
+# test recomputes it with fewer).
+TRACE_SHAPE_SETS: dict[str, tuple[int, ...]] = {"Easy": (0,), "Medium": (0, 1), "Hard": (0, 1, 2)}
+TRACE_SHAPE_GUESS_RATES: dict[str, float] = {"Easy": 0.0597, "Medium": 0.0312, "Hard": 0.0177}
 
 
 
@@ -134,6 +140,41 @@ def coupon_chance(n: int, draws: int) -> float:
     return sum((-1) ** j * math.comb(n, j) * ((n - j) / n) ** draws for j in range(n + 1))
 
 
+def trace_shape_guess_rate(shape_set: tuple[int, ...], samples: int = 200_000, seed: int = 0) -> float:
+    """Monte Carlo chance of TraceShape with ``shape_set``: the share of episodes in which a
+    contour guessed from the task's prior (shape, centre, size and rotation drawn as the env
+    draws them), traced along its checkpoints and back to the first, passes within the
+    checkpoint radius of every true checkpoint (which also closes the true contour). Imports
+    the env module for its geometry."""
+    import numpy as np
+    import torch
+    from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
+    from mikasa_envs.tasks._trace_shape import checkpoints_of, shape_waypoints
+
+    rng = np.random.default_rng(seed)
+
+    def draw_checkpoints(n: int) -> np.ndarray:
+        shapes = torch.as_tensor(rng.choice(shape_set, n))
+        centres = np.stack([rng.uniform(*env.CENTER_X_RANGE, n), rng.uniform(*env.CENTER_Y_RANGE, n)], -1)
+        sizes, rotations = rng.uniform(*env.SIZE_RANGE, n), rng.uniform(0.0, 2 * math.pi, n)
+        waypoints = shape_waypoints(
+            shapes, *(torch.as_tensor(a, dtype=torch.float32) for a in (centres, sizes, rotations))
+        )
+        return checkpoints_of(waypoints).double().numpy()
+
+    passed = 0
+    for start in range(0, samples, 10_000):
+        n = min(10_000, samples - start)
+        truth, guess = draw_checkpoints(n), draw_checkpoints(n)
+        # The guessed trace: straight moves between its checkpoints, closed, 16 points a move.
+        ends = np.roll(guess, -1, axis=1)
+        steps = np.linspace(0.0, 1.0, 16, endpoint=False)[None, None, :, None]
+        trace = (guess[:, :, None] + (ends - guess)[:, :, None] * steps).reshape(n, -1, 2)
+        distance = np.linalg.norm(truth[:, :, None] - trace[:, None], axis=-1).min(axis=-1)
+        passed += int((distance < env.CHECKPOINT_RADIUS).all(axis=-1).sum())
+    return passed / samples
+
+
 def task_chance(env_id: str) -> Chance:
     """The chance success rate of ``env_id`` (a manifest id) and its one-line reason."""
     from mikasa_envs.manifest import SELECTION_FAMILIES, SHELL_GAME_FAMILIES, get_task
@@ -193,10 +234,18 @@ def task_chance(env_id: str) -> Chance:
             "0: no discrete answer; the launch velocity is continuous and one frame shows no "
             "motion, so any success without memory means the ball can be met reactively",
         )
-    if family in ("trace_shape", "trace_shape_seq"):
+    if family == "trace_shape":
+        variant = _variant(env_id, "TraceShape")
+        return Chance(
+            TRACE_SHAPE_GUESS_RATES[variant],
+            f"no discrete answer; a contour guessed from the prior ({len(TRACE_SHAPE_SETS[variant])} "
+            "shape(s), centre, size, rotation) passes all 12 checkpoints of the true one at this "
+            "rate (the 3.5 cm radius forgives a near guess)",
+        )
+    if family == "trace_shape_seq":
         return Chance(
             0.0,
-            "0: no discrete answer; the contour's size and rotation are continuous and never "
+            "0: no discrete answer; the contours' size and rotation are continuous and never "
             "shown again, so any success without memory is a leak",
         )
     raise ValueError(f"no chance rate for {env_id!r} (family {family!r})")

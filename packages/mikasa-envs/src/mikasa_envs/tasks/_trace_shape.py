@@ -117,6 +117,9 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     # Offsets from the shape centre (XY).
     GREEN_CUBE_OFFSET: ClassVar[tuple[float, float]] = (-0.16, 0.0)
     LAMP_OFFSET: ClassVar[tuple[float, float]] = (0.25, 0.0)
+    # A fixed world XY for the lamp instead of centre + LAMP_OFFSET (None: the offset). A lamp
+    # that follows the centre shows where the contour is all episode (TraceShape sets it).
+    LAMP_POSITION: ClassVar[tuple[float, float] | None] = None
     # Pre-demo length P ~ uniform int [lo, hi]; the demo shows one waypoint per step.
     PRE_DEMO_STEPS: ClassVar[tuple[int, int]] = (3, 8)
     CHECKPOINT_RADIUS: ClassVar[float] = 0.035
@@ -218,7 +221,10 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         self.green_cube.set_linear_velocity(zeros)
         self.green_cube.set_angular_velocity(zeros)
         lamp = torch.zeros(b, 3, device=self.device)
-        lamp[:, :2] = centre + torch.tensor(self.LAMP_OFFSET, device=self.device)
+        if self.LAMP_POSITION is None:
+            lamp[:, :2] = centre + torch.tensor(self.LAMP_OFFSET, device=self.device)
+        else:
+            lamp[:, :2] = torch.tensor(self.LAMP_POSITION, device=self.device)
         self.lamp.place(env_idx, lamp, BULB_WHITE)
 
     def _sample_phase_lengths(self, env_idx: torch.Tensor) -> None:

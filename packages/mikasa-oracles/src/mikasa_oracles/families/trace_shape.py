@@ -208,14 +208,14 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
     the env's checkpoint and closure latches (hidden: they would say which guessed points
     missed) are not read.
 
-    When the lamp turns green the red cube is gone, so it traces a guessed contour: about
-    the shape centre, which the lamp shows (the lamp stands at centre + ``LAMP_OFFSET``, a
-    fixed rule of the task), a shape from the variant's set (TraceShapeSeq: the shapes in
-    ``task_cue``, part of the VLA observation), a size drawn from ``SIZE_RANGE`` and a
-    rotation from [0, 2π), all fixed per episode; it goes round each contour ``PASSES``
-    times, blind. Chance is 0 (continuous size and rotation); any success is a leak (a
-    circle's rotation does not matter, and one of middle size passes within the 3.5 cm
-    checkpoint radius of every circle in the size range). Kept: the script's progress.
+    When the lamp turns green the red cube is gone, so it traces a guessed contour: a shape
+    from the variant's set (TraceShapeSeq: the shapes in ``task_cue``, part of the VLA
+    observation), a size drawn from ``SIZE_RANGE``, a rotation from [0, 2π) and a centre:
+    TraceShapeSeq's lamp stands at centre + ``LAMP_OFFSET`` and shows it; TraceShape's lamp
+    stands at a fixed spot, so the centre is drawn from ``CENTER_X_RANGE`` × ``CENTER_Y_RANGE``.
+    All fixed per episode; it goes round each contour ``PASSES`` times, blind. TraceShape's
+    chance (``mikasa_bench.chance``) is the rate at which such a guess passes every
+    checkpoint. Kept: the script's progress.
     """
 
     PASSES = 2
@@ -235,7 +235,10 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
         rng = self.guess_rng(len(shapes), 1)
         sizes = rng.uniform(*base.SIZE_RANGE, size=len(shapes))
         rotations = rng.uniform(0.0, 2 * np.pi, size=len(shapes))
-        centre = base.lamp.position[0, :2].cpu().numpy().astype(np.float64) - np.asarray(base.LAMP_OFFSET)
+        if base.LAMP_POSITION is None:  # the lamp follows the centre
+            centre = base.lamp.position[0, :2].cpu().numpy().astype(np.float64) - np.asarray(base.LAMP_OFFSET)
+        else:
+            centre = np.array([rng.uniform(*base.CENTER_X_RANGE), rng.uniform(*base.CENTER_Y_RANGE)])
         waypoints = shape_waypoints(
             torch.as_tensor(shapes, dtype=torch.long),
             torch.as_tensor(np.tile(centre, (len(shapes), 1)), dtype=torch.float32),
