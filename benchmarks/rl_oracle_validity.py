@@ -1,14 +1,20 @@
-"""Validity of the 32 RL tasks: scripted-oracle and zero-action success over many seeds.
+"""Validity of the 32 RL tasks: does each need memory? (issue 16 §1 for the RL release)
 
-A task is valid when its oracle (``mikasa_robo_rl.oracles.make_rl_oracle``: the VLA family
-oracle acting in ``pd_joint_delta_pos``) reaches ``success_once`` on >= 95 % of the seeds
-and zero actions on none. State observations, CPU PhysX, one env per worker process;
-jobs are (env id, policy, block of seeds).
+Four policies over the canonical seeds: the scripted oracle
+(``mikasa_robo_rl.oracles.make_rl_oracle``: the VLA family oracle acting in
+``pd_joint_delta_pos``), its memoryless variant (``memoryless=True``: the same controller,
+the remembered answer wiped every step, guesses seeded by the episode seed), seeded uniform
+random actions and zero actions. A task is valid when the oracle reaches ``success_once`` on
+>= 95 % of the seeds, zero actions on none, and neither the memoryless oracle nor random
+actions do significantly better than chance (the lower end of their Wilson 95 % interval
+above it). Chance is the VLA twin's (``mikasa_bench.chance``: the RL tasks are the same
+families with other timing, so the candidates are the same). State observations, CPU
+PhysX, one env per worker process; jobs are (env id, policy, block of seeds).
 
-The oracle stops at its first success. Seeds it fails within the published horizon are run
-again with the step limit raised to ``--horizon-factor`` x the horizon: a success there says
-the horizon, not the oracle, was short (a rerun, not a longer first run, because some
-oracles plan with the time left).
+Every policy stops at its first success. Seeds the oracle fails within the published
+horizon are run again with the step limit raised to ``--horizon-factor`` x the horizon: a
+success there says the horizon, not the oracle, was short (a rerun, not a longer first run,
+because some oracles plan with the time left).
 
     python benchmarks/rl_oracle_validity.py                        # 50 seeds, every RL id
     python benchmarks/rl_oracle_validity.py --seeds 10 --env-ids RememberColor3-v0,TakeItBack-v0
@@ -30,17 +36,19 @@ from pathlib import Path
 FIRST_SEED = 4242424242
 SEEDS_PER_JOB = 10
 TARGET = 0.95
+POLICIES = ("oracle", "oracle-memoryless", "random", "zero")
 
 
 def run_job(
     env_id: str, policy: str, seeds: list[int], horizon_factor: float
 ) -> tuple[str, str, dict[int, tuple[int, bool]]]:
-    """Roll ``policy`` ("oracle" or "zero") out on ``seeds``: {seed: (step of first success,
+    """Roll ``policy`` (one of ``POLICIES``) out on ``seeds``: {seed: (step of first success,
     within the horizon)} for the seeds that succeeded (oracle failures rerun with
     ``horizon_factor`` x the horizon as the step limit)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import gymnasium as gym
     import torch
+    from mikasa_bench.policies import RandomPolicy
     from mikasa_oracles import ZeroActions, rollout
     from mikasa_robo_rl import get_rl_task
     from mikasa_robo_rl.oracles import make_rl_oracle
@@ -50,13 +58,19 @@ def run_job(
     def make(limit: int | None = None) -> tuple[gym.Env, object]:
         env = gym.make(env_id, obs_mode="state", control_mode="pd_joint_delta_pos",
                        reward_mode="normalized_dense", max_episode_steps=limit)
-        return env, make_rl_oracle(env) if policy == "oracle" else ZeroActions(8)
+        agents = {
+            "oracle": lambda: make_rl_oracle(env),
+            "oracle-memoryless": lambda: make_rl_oracle(env, memoryless=True),
+            "random": lambda: RandomPolicy(action_shape=(8,)),
+            "zero": lambda: ZeroActions(8),
+        }
+        return env, agents[policy]()
 
     env, agent = make()
     won = {}
     for seed in seeds:
-        # The oracle stops at its first success; zero actions run the whole episode.
-        result = rollout(env, agent, seed, stop_on_success=policy == "oracle")
+        # success_once is latched: every policy may stop at its first success.
+        result = rollout(env, agent, seed, stop_on_success=True)
         if result.success_once:
             won[seed] = (result.steps, True)
     env.close()
@@ -90,9 +104,9 @@ def main() -> None:
         mikasa_robo_rl.get_rl_task(env_id)  # unknown ids fail here, before any work
     seeds = list(range(FIRST_SEED, FIRST_SEED + args.seeds))
     blocks = [seeds[i : i + SEEDS_PER_JOB] for i in range(0, len(seeds), SEEDS_PER_JOB)]
-    jobs = [(e, p, b) for e in env_ids for p in ("oracle", "zero") for b in blocks]
+    jobs = [(e, p, b) for e in env_ids for p in POLICIES for b in blocks]
 
-    wins: dict[tuple[str, str], dict[int, tuple[int, bool]]] = {(e, p): {} for e in env_ids for p in ("oracle", "zero")}
+    wins: dict[tuple[str, str], dict[int, tuple[int, bool]]] = {(e, p): {} for e in env_ids for p in POLICIES}
     start = time.perf_counter()
     with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
         futures = [pool.submit(run_job, *job, args.horizon_factor) for job in jobs]
@@ -103,6 +117,8 @@ def main() -> None:
     wall = time.perf_counter() - start
 
     import numpy as np
+    from mikasa_bench.chance import task_chance
+    from mikasa_bench.metrics import wilson_interval
     from mikasa_robo_rl import get_rl_task
 
     rows = []
@@ -110,20 +126,30 @@ def main() -> None:
         horizon = get_rl_task(env_id).max_episode_steps
         steps = wins[(env_id, "oracle")]
         in_time = [s for s, (_, within) in steps.items() if within]
-        oracle, zero = len(in_time) / len(seeds), len(wins[(env_id, "zero")]) / len(seeds)
+        rate = {p: len(wins[(env_id, p)]) / len(seeds) for p in POLICIES}
+        rate["oracle"] = len(in_time) / len(seeds)
+        # The RL task is its VLA twin's family with other timing: the same candidates.
+        chance = task_chance(env_id.removesuffix("-v0") + "-VLA-v0").rate
+        above_chance = [p for p in ("oracle-memoryless", "random")
+                        if wilson_interval(len(wins[(env_id, p)]), len(seeds))[0] > chance]
         needed = np.array(sorted(n for n, _ in steps.values())) if steps else np.array([np.nan])
-        rows.append(dict(env_id=env_id, horizon=horizon, oracle_success=oracle, zero_success=zero,
-                         valid=oracle >= TARGET and zero == 0.0,
+        rows.append(dict(env_id=env_id, horizon=horizon, oracle_success=rate["oracle"],
+                         memoryless_success=rate["oracle-memoryless"], random_success=rate["random"],
+                         zero_success=rate["zero"], chance=chance,
+                         above_chance=above_chance,
+                         valid=rate["oracle"] >= TARGET and rate["zero"] == 0.0 and not above_chance,
                          oracle_success_extended=len(steps) / len(seeds),
                          steps_to_success_p50=float(np.percentile(needed, 50)),
                          steps_to_success_p95=float(np.percentile(needed, 95)),
                          oracle_failed_seeds=sorted(set(seeds) - set(in_time)),
                          zero_succeeded_seeds=sorted(wins[(env_id, "zero")])))
     limit = f"{args.horizon_factor:g}x horizon"
-    lines = [f"| env id | horizon | oracle success_once | zero-action success_once | valid "
-             f"| oracle within {limit} | steps to success p50 / p95 |", "|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['env_id']} | {r['horizon']} | {r['oracle_success']:.2f} | {r['zero_success']:.2f} "
-              f"| {'yes' if r['valid'] else 'NO'} | {r['oracle_success_extended']:.2f} "
+    lines = [f"| env id | horizon | oracle | memoryless | random | zero | chance | valid "
+             f"| oracle within {limit} | steps to success p50 / p95 |", "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['env_id']} | {r['horizon']} | {r['oracle_success']:.2f} | {r['memoryless_success']:.2f} "
+              f"| {r['random_success']:.2f} | {r['zero_success']:.2f} | {r['chance']:.3f} "
+              f"| {'yes' if r['valid'] else 'NO' + ''.join(f' ({p}>chance)' for p in r['above_chance'])} "
+              f"| {r['oracle_success_extended']:.2f} "
               f"| {r['steps_to_success_p50']:.0f} / {r['steps_to_success_p95']:.0f} |" for r in rows]
     summary = f"{sum(r['valid'] for r in rows)}/{len(rows)} ids valid over {len(seeds)} seeds; {wall:.0f} s with {args.workers} workers"
     print("\n".join(lines) + "\n\n" + summary)

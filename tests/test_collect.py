@@ -297,6 +297,22 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
     assert tree(tmp_path / "parallel" / "data") == tree(tmp_path / "serial" / "data")
 
 
+def test_ray_executor_writes_what_local_workers_write(reference, tmp_path, capsys):
+    """``--executor ray``: the actors stage on their node and send the bytes back; the
+    files are the in-process collection's, and a Ray the caller started is left running."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, object_store_memory=100 * 1024**2, log_to_driver=False)
+    try:
+        with chdir(tmp_path):
+            status = main(["--env-id", ENV_ID, "--num-episodes", str(N), "--out", "data",
+                           "--workers", "2", "--executor", "ray", "--no-progress"])
+        assert status == 0 and ray.is_initialized()
+    finally:
+        ray.shutdown()
+    assert tree(tmp_path / "data") == tree(reference / "data")
+    assert "2 worker" in capsys.readouterr().out
+
+
 # --------------------------------------------------------------------------- bad input
 @pytest.mark.parametrize(
     "argv, fragment",
@@ -312,6 +328,7 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
         (["--env-id", ENV_ID, "--env-id", "RememberColour3-VLA-v0"], "Did you mean: RememberColor3-VLA-v0"),
         (["--env-id", ENV_ID, "--split", "short"], "not allowed with argument"),
         (["--split", "tiny"], "invalid choice: 'tiny'"),
+        (["--env-id", ENV_ID, "--executor", "slurm"], "invalid choice: 'slurm'"),
         ([], "one of the arguments --env-id --split is required"),
     ],
 )

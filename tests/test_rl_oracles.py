@@ -67,6 +67,21 @@ def test_oracle_acts_in_joint_deltas_through_the_rl_rgb_chain(make_rl_env):
     assert _successes(env, oracle, [SEED]) == 1
 
 
+def test_memoryless_rl_oracle_guesses_from_the_episode_seed(make_rl_env):
+    """The memoryless variant acts in joint deltas too, and its guesses are the episode
+    seed's: the same seed gives the same episode, whatever ran before."""
+    from mikasa_oracles.scripted import Memoryless
+
+    env = make_rl_env("RememberColor5-v0")
+    oracle = make_rl_oracle(env, memoryless=True)
+    assert isinstance(oracle.oracle, Memoryless)
+    first = [rollout(env, oracle, s).steps for s in (SEED, SEED + 1)]
+    again = [rollout(env, oracle, s).steps for s in (SEED + 1, SEED)]
+    assert first == again[::-1]
+    oracle.reset(seed=SEED + 7)
+    assert oracle.oracle.episode_seed == SEED + 7
+
+
 def test_oracle_needs_the_rl_control_mode(make_rl_env, make_env):
     env = make_env("RememberColor3-v0", control_mode="pd_ee_delta_pose")
     with pytest.raises(ValueError, match="act in control_mode='pd_joint_delta_pos'"):

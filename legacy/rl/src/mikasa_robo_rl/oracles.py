@@ -54,15 +54,17 @@ ORACLE_OPTIONS: dict[str, dict[str, Any]] = {
 }
 
 
-def make_rl_oracle(env: gym.Env, **kwargs: Any) -> Any:
+def make_rl_oracle(env: gym.Env, memoryless: bool = False, **kwargs: Any) -> Any:
     """The scripted oracle of the RL task ``env`` (made with ``gym.make``, wrapped or not).
 
-    Follows the bench policy protocol (``chunk_size``, ``reset()``, ``forward(obs)``) and
-    returns 8-D ``pd_joint_delta_pos`` actions; one env (``num_envs == 1``) per oracle.
-    ``kwargs`` go to the family oracle (e.g. ``gain``), over the ``ORACLE_OPTIONS`` of its family.
+    Follows the bench policy protocol (``chunk_size``, ``reset(seed=None)``, ``forward(obs)``)
+    and returns 8-D ``pd_joint_delta_pos`` actions; one env (``num_envs == 1``) per oracle.
+    ``memoryless=True`` builds the family's memoryless variant (``mikasa_oracles.make_oracle``;
+    its guesses are seeded by the episode seed given to ``reset``). ``kwargs`` go to the
+    family oracle (e.g. ``gain``), over the ``ORACLE_OPTIONS`` of its family.
     """
     try:
-        from mikasa_oracles import ORACLES
+        from mikasa_oracles import MEMORYLESS_ORACLES, ORACLES
         from mikasa_oracles.joint_delta import JointDeltaOracle
     except ImportError as err:
         raise ImportError(
@@ -78,4 +80,5 @@ def make_rl_oracle(env: gym.Env, **kwargs: Any) -> Any:
         )
     oracle_options = {**ORACLE_OPTIONS.get(task.family, {}), **kwargs}
     options = CONVERTER_OPTIONS.get(task.family, {})
-    return JointDeltaOracle(ORACLES[task.family](env, **oracle_options), **options)
+    table = MEMORYLESS_ORACLES if memoryless else ORACLES
+    return JointDeltaOracle(table[task.family](env, **oracle_options), **options)

@@ -92,9 +92,10 @@ LEAKS: tuple[Leak, ...] = (
         "closure",
         evidence="memoryless oracle (guessed shape, size and rotation about the lamp's centre), "
         "seeds 4242424242+0..9, state obs: TraceShapeEasy 9/10, TraceShapeMedium 3-4/10; a "
-        "Monte Carlo of such guesses passes 90 % of Easy episodes. After the fix: the "
-        "memoryless oracle (centre guessed from its range too) 5/50 on Easy, 0/10 on Medium; "
-        "chance (a contour guessed from the prior, mikasa_bench.chance) 6.0 / 3.1 / 1.8 %",
+        "Monte Carlo of such guesses passes 90 % of Easy episodes. After the fix (50 canonical "
+        "seeds): the memoryless oracle (centre guessed from its range too) 5/50, 1/50, 1/50 "
+        "on Easy, Medium, Hard against chance (a contour guessed from the prior, "
+        "mikasa_bench.chance) 6.0 / 3.1 / 1.8 %",
         status="closed",
         fix="the lamp stands at a fixed spot, (0.2, 0), for every episode; draws, scoring and "
         "the reset frames' parity with the reference are unchanged (top camera 0.51/255)",
@@ -107,8 +108,9 @@ LEAKS: tuple[Leak, ...] = (
         "ball's position in the current frame is often enough to meet a slow ball, so the "
         "motion need not be measured across frames",
         evidence="memoryless oracle (a velocity drawn from the launch range, the current ball "
-        "position each step), seeds 4242424242+0..9, state obs: InterceptGrabSlow 5/10, "
-        "InterceptGrabMedium 1/10, InterceptSlow 1/10; chance 0",
+        "position each step), 50 canonical seeds, state obs: InterceptSlow/Medium/Fast 13, 10, "
+        "2 of 50; InterceptGrabSlow/Medium/Fast 25, 8, 6 of 50 (the oracle 49-50 of 50); "
+        "chance 0",
         status="kept",
         fix="none: it is the published task (the spec's ranges), shared with the RL release's "
         "InterceptSlow/Medium/Fast and InterceptGrab*, whose PPO baselines and datasets assume "
@@ -116,5 +118,20 @@ LEAKS: tuple[Leak, ...] = (
         "meeting a slow ball is what these tasks allow; their memory demand shows as the gap "
         "to the oracle (which measures the velocity), largest on the Medium and Fast variants",
         reference="packages/mikasa-envs/DEVIATIONS.md, Kept (Intercept*)",
+    ),
+    Leak(
+        tasks="TraceShapeSeq{Easy,Medium,Hard}",
+        leak="the lamp (centre + (0.25, 0)) and the submit button (centre + (0.27, 0.16)) show "
+        "the common centre of the contours all episode, and the shapes themselves are in "
+        "task_cue (part of the VLA observation, published contract): only sizes and rotations "
+        "are hidden, and circles about the centre at a guessed size pass as in TraceShape",
+        evidence="memoryless oracle (the cue's shapes, guessed sizes and rotations about the "
+        "centre the lamp shows), 50 canonical seeds, state obs: Easy 35/50, Medium 15/50, "
+        "Hard 14/50 (the oracle 50/50); chance 0",
+        status="open",
+        fix="not fixed yet. TraceShape's fix (the lamp at a fixed spot) is not enough: the "
+        "button shows the centre too, and a fixed button would have to stay within the arm's "
+        "reach (the reference's is already at its edge in half the episodes) and more than its "
+        "6.5 cm press radius from every contour (a low TCP there ends the episode)",
     ),
 )

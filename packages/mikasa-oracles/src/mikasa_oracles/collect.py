@@ -18,7 +18,8 @@ Seeds and determinism
 
 Parallelism
     ``--workers W`` (W >= 2) starts W spawn-started processes (SAPIEN is not fork-safe),
-    each with one env. Seeds are handed out in order; a finished successful attempt is
+    each with one env; with ``--executor ray``, W actors of a Ray cluster
+    (:mod:`mikasa_oracles.collect_pools`). Seeds are handed out in order; a finished successful attempt is
     staged in ``data_npz/_batched/<dataset_name>/seed_<s>.npz`` and renamed to its final
     ``train_data_<i>.npz`` only once every smaller seed has finished, so indices follow
     seed order whatever the completion order. No more attempts are in flight than
@@ -36,21 +37,26 @@ from __future__ import annotations
 import argparse
 import fcntl
 import logging
-import multiprocessing as mp
 import os
-import queue
 import random
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from mikasa_oracles.collect_pools import (
+    CollectError,
+    CollectionFailed,
+    InlinePool,
+    ProcessPool,
+    RayPool,
+)
 
 __all__ = [
     "AttemptResult",
@@ -63,6 +69,7 @@ __all__ = [
     "DEFAULT_START_SEED",
     "InlinePool",
     "ProcessPool",
+    "RayPool",
     "collect",
     "default_max_attempts",
     "locked_directory",
@@ -89,19 +96,11 @@ REWARD_MODE = "normalized_dense"
 SIM_BACKEND = "cpu"
 STAGED_PREFIX = "seed_"
 
+EXECUTORS = ("local", "ray")
+"""``--executor`` values: local processes, or the actors of a Ray cluster."""
+
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 _TRUTHY = {"1", "true", "yes", "y", "on"}
-
-
-class CollectError(ValueError):
-    """Bad input (unknown task, no oracle, bad counts, inconsistent existing data): exit 2."""
-
-
-class CollectionFailed(RuntimeError):
-    """The collection could not finish (attempt budget spent, a worker crashed): exit 1.
-
-    Episodes saved so far stay valid; re-running continues from them.
-    """
 
 
 # --------------------------------------------------------------------------- task checks
@@ -303,121 +302,6 @@ class _AttemptRunner:
         self.env = self.oracle = None
 
 
-# --------------------------------------------------------------------------- executors
-class InlinePool:
-    """``--workers 1``: attempts run in this process, one at a time.
-
-    ``factory(*runner_args)`` builds the runner (default :class:`_AttemptRunner`; the RL
-    collector, ``mikasa_robo_rl.collect``, passes its own).
-    """
-
-    def __init__(
-        self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None
-    ) -> None:
-        self.runner = (factory or _AttemptRunner)(*runner_args)
-        self.queue: list[Any] = []
-
-    def submit(self, seed: int) -> None:
-        self.queue.append(seed)
-
-    def get(self) -> AttemptResult:
-        return self.runner.run(self.queue.pop(0))
-
-    def close(self) -> None:
-        self.runner.close()
-
-
-def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None) -> Any:
-    from mikasa_envs.workers import quiet_worker  # imported lazily: mikasa_envs loads ManiSkill
-
-    quiet_worker()
-    return (factory or _AttemptRunner)(*runner_args)
-
-
-def _worker_main(
-    worker_id: int,
-    runner_args: tuple[Any, ...],
-    jobs: Any,
-    results: Any,
-    factory: Callable[..., Any] | None = None,
-) -> None:
-    """Entry point of a spawn-started worker: run jobs (seeds) from ``jobs`` until ``None``."""
-    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
-
-    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args, factory))
-
-
-class ProcessPool:
-    """``--workers W``: W spawn-started processes sharing one job queue.
-
-    Each builds ``factory(*runner_args)`` (default :class:`_AttemptRunner`; ``factory``
-    must be importable by name, e.g. a module-level class). A job's result names its job
-    in the attribute ``job_attr`` (an attempt's ``seed``).
-    """
-
-    def __init__(
-        self,
-        runner_args: tuple[Any, ...],
-        workers: int,
-        factory: Callable[..., Any] | None = None,
-        *,
-        job_attr: str = "seed",
-        name: str = "mikasa-collect",
-    ) -> None:
-        ctx = mp.get_context("spawn")
-        self.jobs = ctx.Queue()
-        self.results = ctx.Queue()
-        self.job_attr = job_attr
-        self.in_flight: set[Any] = set()
-        self.processes = [
-            ctx.Process(
-                target=_worker_main,
-                args=(wid, runner_args, self.jobs, self.results, factory),
-                daemon=True,
-                name=f"{name}-{wid}",
-            )
-            for wid in range(workers)
-        ]
-        for p in self.processes:
-            p.start()
-
-    def submit(self, seed: Any) -> None:
-        self.in_flight.add(seed)
-        self.jobs.put(seed)
-
-    def get(self) -> Any:
-        while True:
-            try:
-                kind, wid, payload = self.results.get(timeout=1.0)
-            except queue.Empty:
-                dead = [p for p in self.processes if not p.is_alive()]
-                if dead and self.in_flight:
-                    raise CollectionFailed(
-                        f"worker {dead[0].name} died (exit code {dead[0].exitcode}) with "
-                        f"{self.job_attr}s {sorted(self.in_flight)} in flight; saved episodes "
-                        "are kept, rerun to resume"
-                    ) from None
-                continue
-            if kind == "fatal":
-                raise CollectionFailed(f"worker {wid} failed to start:\n{payload}")
-            if kind == "ready":
-                continue
-            self.in_flight.discard(getattr(payload, self.job_attr))
-            return payload
-
-    def close(self, graceful: bool = True) -> None:
-        from mikasa_envs.workers import stop_processes
-
-        graceful = graceful and not self.in_flight
-        if graceful:
-            for _ in self.processes:
-                self.jobs.put(None)
-        # Graceful: nothing is left to write (every attempt came back), so a worker slow
-        # to tear down its simulator is not worth waiting for long. Error / interrupt:
-        # stop now; their attempts were not committed and will be rerun.
-        stop_processes(self.processes, wait_s=3 if graceful else 0)
-
-
 # --------------------------------------------------------------------------- the collection
 @dataclass
 class CollectionSummary:
@@ -554,11 +438,15 @@ def collect(
     min_episode_length: int = DEFAULT_MIN_EPISODE_LENGTH,
     progress: bool = True,
     log_attempts: bool = False,
+    executor: str = "local",
+    ray_address: str | None = None,
 ) -> CollectionSummary:
     """Collect ``num_episodes`` successful oracle episodes of ``env_id`` under ``out``.
 
     Resumes what is already in ``<out>/data_npz/<dataset_name>/``. ``max_attempts`` bounds
-    the attempts of this call (default :func:`default_max_attempts`). Raises
+    the attempts of this call (default :func:`default_max_attempts`). ``executor`` "local"
+    runs ``workers`` local processes (in-process for 1), "ray" as many Ray actors
+    (``ray_address``, ``$RAY_ADDRESS`` or a local Ray instance); the files are the same. Raises
     :class:`CollectError` for bad input and :class:`CollectionFailed` if the budget runs
     out or a worker crashes; saved episodes stay valid in both cases.
     """
@@ -578,6 +466,8 @@ def collect(
     ):
         if int(value) < low:
             raise CollectError(f"{name} must be >= {low}, got {value}")
+    if executor not in EXECUTORS:
+        raise CollectError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     if max_attempts is not None and max_attempts < 1:
         raise CollectError(f"max_attempts must be >= 1, got {max_attempts}")
     if not 0 <= start_seed <= MAX_SEED:
@@ -624,9 +514,12 @@ def collect(
         staging.mkdir(parents=True, exist_ok=True)
         runner_args = (env_id, str(staging), min_episode_length, spec.language_instruction)
         n_workers = min(workers, missing)
-        pool: Any = (
-            InlinePool(runner_args) if n_workers == 1 else ProcessPool(runner_args, n_workers)
-        )
+        if executor == "ray":
+            pool: Any = RayPool(runner_args, n_workers, address=ray_address)
+        elif n_workers == 1:
+            pool = InlinePool(runner_args)
+        else:
+            pool = ProcessPool(runner_args, n_workers)
         log_attempts = (
             log_attempts or os.environ.get("MIKASA_LOG_EPISODE_LENGTHS", "").lower() in _TRUTHY
         )
@@ -697,10 +590,7 @@ def collect(
             ok = True
         finally:
             bar.close()
-            if isinstance(pool, ProcessPool):
-                pool.close(graceful=ok)
-            else:
-                pool.close()
+            pool.close(graceful=ok)
             _clean_staging(staging)
             summary.wall_s = time.perf_counter() - t0
             if summary.attempts:
@@ -767,7 +657,21 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"dataset root (default {DEFAULT_OUT})",
     )
     p.add_argument(
-        "--workers", type=_int_at_least(1), default=1, help="parallel worker processes (default 1)"
+        "--workers",
+        type=_int_at_least(1),
+        default=1,
+        help="parallel workers: local processes, or Ray actors with --executor ray (default 1)",
+    )
+    p.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        default="local",
+        help="where the workers run: local processes (default) or a Ray cluster (same files)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        help="Ray cluster to join with --executor ray (default: $RAY_ADDRESS, else a local Ray)",
     )
     p.add_argument(
         "--start-seed",
@@ -842,6 +746,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 min_episode_length=args.min_episode_length,
                 progress=not args.no_progress,
                 log_attempts=args.log_attempts,
+                executor=args.executor,
+                ray_address=args.ray_address,
             )
         except CollectError as exc:
             print(f"mikasa-collect: error: {exc}", file=sys.stderr)

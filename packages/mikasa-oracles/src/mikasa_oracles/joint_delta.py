@@ -381,9 +381,15 @@ class JointDeltaOracle:
         """The inner oracle's chunk size (1)."""
         return self.oracle.chunk_size
 
-    def reset(self) -> None:
-        """Reset the inner oracle for a new episode."""
-        self.oracle.reset()
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the inner oracle for a new episode; ``seed`` (the episode seed) reaches an
+        inner oracle whose ``reset`` takes one (a memoryless oracle seeds its guesses)."""
+        from mikasa_oracles.rollout import reset_with_seed
+
+        if seed is None:
+            self.oracle.reset()
+        else:
+            reset_with_seed(self.oracle, seed)
 
     def forward(self, obs: Any) -> np.ndarray:
         """The inner oracle's action for ``obs``, as an (8,) float32 joint-delta action."""

@@ -1,0 +1,304 @@
+"""The executors of ``mikasa-collect``: where the attempts (one seed each) run.
+
+Every pool has the same small interface: ``submit(seed)``, ``get()`` (the next finished
+attempt, in completion order) and ``close()``. The collector keeps at most as many attempts
+in flight as the pool has workers and commits them in seed order, so the files do not depend
+on the pool, its size or the timing.
+
+* :class:`InlinePool` — ``--workers 1``: in this process.
+* :class:`ProcessPool` — ``--workers W``: W spawn-started local processes.
+* :class:`RayPool` — ``--executor ray``: W actors on a Ray cluster (one CPU each, spread over
+  the nodes, with an equal share of the cluster's GPUs where it has any, so that they
+  render there). Each actor stages its episodes in a directory of its own node and sends
+  the file's bytes back; only this process writes into the dataset, so the nodes need no
+  shared filesystem.
+
+A runner is built by ``factory(*runner_args)`` (default: the VLA collector's attempt runner,
+``mikasa_oracles.collect._AttemptRunner``, whose second argument is the staging directory).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+import shutil
+import tempfile
+from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+__all__ = ["CollectError", "CollectionFailed", "InlinePool", "ProcessPool", "RayPool"]
+
+RAY_READY_TIMEOUT_S = 600.0
+"""How long the Ray actors may take to start (imports, scheduling) before giving up."""
+
+
+class CollectError(ValueError):
+    """Bad input (unknown task, no oracle, bad counts, inconsistent existing data): exit 2."""
+
+
+class CollectionFailed(RuntimeError):
+    """The collection could not finish (attempt budget spent, a worker crashed): exit 1.
+
+    Episodes saved so far stay valid; re-running continues from them.
+    """
+
+
+
+
+class InlinePool:
+    """``--workers 1``: attempts run in this process, one at a time.
+
+    ``factory(*runner_args)`` builds the runner (default :class:`_AttemptRunner`; the RL
+    collector, ``mikasa_robo_rl.collect``, passes its own).
+    """
+
+    def __init__(
+        self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None
+    ) -> None:
+        self.runner = _runner_factory(factory)(*runner_args)
+        self.queue: list[Any] = []
+
+    def submit(self, seed: int) -> None:
+        self.queue.append(seed)
+
+    def get(self) -> Any:
+        return self.runner.run(self.queue.pop(0))
+
+    def close(self, graceful: bool = True) -> None:
+        self.runner.close()
+
+
+def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None) -> Any:
+    from mikasa_envs.workers import quiet_worker  # imported lazily: mikasa_envs loads ManiSkill
+
+    quiet_worker()
+    return _runner_factory(factory)(*runner_args)
+
+
+def _worker_main(
+    worker_id: int,
+    runner_args: tuple[Any, ...],
+    jobs: Any,
+    results: Any,
+    factory: Callable[..., Any] | None = None,
+) -> None:
+    """Entry point of a spawn-started worker: run jobs (seeds) from ``jobs`` until ``None``."""
+    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
+
+    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args, factory))
+
+
+class ProcessPool:
+    """``--workers W``: W spawn-started processes sharing one job queue.
+
+    Each builds ``factory(*runner_args)`` (default :class:`_AttemptRunner`; ``factory``
+    must be importable by name, e.g. a module-level class). A job's result names its job
+    in the attribute ``job_attr`` (an attempt's ``seed``).
+    """
+
+    def __init__(
+        self,
+        runner_args: tuple[Any, ...],
+        workers: int,
+        factory: Callable[..., Any] | None = None,
+        *,
+        job_attr: str = "seed",
+        name: str = "mikasa-collect",
+    ) -> None:
+        ctx = mp.get_context("spawn")
+        self.jobs = ctx.Queue()
+        self.results = ctx.Queue()
+        self.job_attr = job_attr
+        self.in_flight: set[Any] = set()
+        self.processes = [
+            ctx.Process(
+                target=_worker_main,
+                args=(wid, runner_args, self.jobs, self.results, factory),
+                daemon=True,
+                name=f"{name}-{wid}",
+            )
+            for wid in range(workers)
+        ]
+        for p in self.processes:
+            p.start()
+
+    def submit(self, seed: Any) -> None:
+        self.in_flight.add(seed)
+        self.jobs.put(seed)
+
+    def get(self) -> Any:
+        while True:
+            try:
+                kind, wid, payload = self.results.get(timeout=1.0)
+            except queue.Empty:
+                dead = [p for p in self.processes if not p.is_alive()]
+                if dead and self.in_flight:
+                    raise CollectionFailed(
+                        f"worker {dead[0].name} died (exit code {dead[0].exitcode}) with "
+                        f"{self.job_attr}s {sorted(self.in_flight)} in flight; saved episodes "
+                        "are kept, rerun to resume"
+                    ) from None
+                continue
+            if kind == "fatal":
+                raise CollectionFailed(f"worker {wid} failed to start:\n{payload}")
+            if kind == "ready":
+                continue
+            self.in_flight.discard(getattr(payload, self.job_attr))
+            return payload
+
+    def close(self, graceful: bool = True) -> None:
+        from mikasa_envs.workers import stop_processes
+
+        graceful = graceful and not self.in_flight
+        if graceful:
+            for _ in self.processes:
+                self.jobs.put(None)
+        # Graceful: nothing is left to write (every attempt came back), so a worker slow
+        # to tear down its simulator is not worth waiting for long. Error / interrupt:
+        # stop now; their attempts were not committed and will be rerun.
+        stop_processes(self.processes, wait_s=3 if graceful else 0)
+
+
+def _runner_factory(factory: Callable[..., Any] | None) -> Callable[..., Any]:
+    if factory is not None:
+        return factory
+    from mikasa_oracles.collect import _AttemptRunner  # the default; collect imports this module
+
+    return _AttemptRunner
+
+
+class _RayAttemptWorker:
+    """Body of a Ray actor: one runner that stages into a directory of the actor's node."""
+
+    def __init__(self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None) -> None:
+        self.staging = tempfile.mkdtemp(prefix="mikasa-collect-")
+        self.runner = _start_runner((runner_args[0], self.staging, *runner_args[2:]), factory)
+
+    def ready(self) -> str:
+        """The node's host name, once the actor is up."""
+        import socket
+
+        return socket.gethostname()
+
+    def run(self, seed: int) -> tuple[Any, bytes | None]:
+        """One attempt, and the staged episode file's bytes (the file is removed here)."""
+        result = self.runner.run(seed)
+        if result.staged is None:
+            return result, None
+        staged = Path(result.staged)
+        data = staged.read_bytes()
+        staged.unlink()
+        return result, data
+
+    def close(self) -> None:
+        self.runner.close()
+        shutil.rmtree(self.staging, ignore_errors=True)
+
+
+def import_ray() -> Any:
+    """``import ray`` with an installation hint."""
+    try:
+        import ray
+    except ImportError:
+        raise CollectError(
+            "--executor ray needs ray: pip install 'mikasa-oracles[ray]' (or pip install ray)"
+        ) from None
+    return ray
+
+
+class RayPool:
+    """``--executor ray``: ``workers`` Ray actors (see the module docstring).
+
+    Connects to ``address`` (or ``$RAY_ADDRESS``), else starts a local Ray instance with
+    ``workers`` CPUs, unless Ray is already initialised; a Ray instance it started is shut
+    down by :meth:`close`. Staged files come back into ``runner_args[1]`` on this machine.
+    """
+
+    def __init__(
+        self,
+        runner_args: tuple[Any, ...],
+        workers: int,
+        factory: Callable[..., Any] | None = None,
+        *,
+        address: str | None = None,
+    ) -> None:
+        ray = self.ray = import_ray()
+        self.staging = Path(runner_args[1])
+        self.started = False
+        if not ray.is_initialized():
+            address = address or os.environ.get("RAY_ADDRESS")
+            options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            if address:
+                ray.init(address=address, **options)
+            else:
+                ray.init(num_cpus=workers, **options)
+            self.started = True
+        gpus = float(ray.cluster_resources().get("GPU", 0.0))
+        options = {"num_cpus": 1, "scheduling_strategy": "SPREAD", "max_restarts": 0}
+        if gpus > 0:  # render on the cluster's GPUs: equal shares (Ray takes 4 decimals)
+            options["num_gpus"] = min(1.0, int(gpus / workers * 10_000) / 10_000)
+        actor_cls = ray.remote(_RayAttemptWorker)
+        self.actors = [actor_cls.options(**options).remote(runner_args, factory) for _ in range(workers)]
+        try:
+            ray.get([a.ready.remote() for a in self.actors], timeout=RAY_READY_TIMEOUT_S)
+        except ray.exceptions.GetTimeoutError:
+            self.close()
+            raise CollectionFailed(
+                f"Ray could not start {workers} worker(s) within {RAY_READY_TIMEOUT_S:.0f} s; "
+                f"cluster resources: {ray.cluster_resources()} (lower --workers?)"
+            ) from None
+        except ray.exceptions.RayError as exc:
+            self.close()
+            raise CollectionFailed(f"a Ray worker failed to start:\n{exc}") from None
+        self.idle = list(self.actors)
+        self.waiting: list[int] = []
+        self.running: dict[Any, tuple[Any, int]] = {}
+
+    def _dispatch(self) -> None:
+        while self.idle and self.waiting:
+            actor, seed = self.idle.pop(), self.waiting.pop(0)
+            self.running[actor.run.remote(seed)] = (actor, seed)
+
+    def submit(self, seed: int) -> None:
+        self.waiting.append(seed)
+        self._dispatch()
+
+    def get(self) -> Any:
+        ray = self.ray
+        (ref,), _ = ray.wait(list(self.running), num_returns=1)
+        actor, seed = self.running.pop(ref)
+        try:
+            result, data = ray.get(ref)
+        except ray.exceptions.RayError as exc:
+            raise CollectionFailed(
+                f"Ray worker failed on seed {seed}: {type(exc).__name__}: {exc}; saved episodes "
+                "are kept, rerun to resume"
+            ) from None
+        self.idle.append(actor)
+        self._dispatch()
+        if data is not None:
+            staged = self.staging / Path(result.staged).name
+            tmp = staged.with_name(staged.name + ".tmp")
+            tmp.write_bytes(data)
+            os.replace(tmp, staged)
+            result = replace(result, staged=str(staged))
+        return result
+
+    def close(self, graceful: bool = True) -> None:
+        ray = self.ray
+        if graceful and not self.running:
+            try:
+                ray.get([a.close.remote() for a in self.actors], timeout=30)
+            except Exception:
+                pass
+        for actor in self.actors:
+            try:
+                ray.kill(actor)
+            except Exception:
+                pass
+        if self.started:
+            ray.shutdown()
