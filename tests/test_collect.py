@@ -27,9 +27,9 @@ from mikasa_oracles.collect import (
     CollectError,
     CollectionFailed,
     collect,
-    main,
     make_collection_env,
 )
+from mikasa_oracles.collect_cli import main
 
 ENV_ID = "RememberColor3-VLA-v0"
 NAME = "remember_color_3_vla_v0"
@@ -369,7 +369,7 @@ def test_console_script_reports_bad_input():
 
 def test_split_selects_the_manifests_tasks_in_order():
     from mikasa_envs.manifest import list_tasks
-    from mikasa_oracles.collect import selected_env_ids
+    from mikasa_oracles.collect_cli import selected_env_ids
 
     assert selected_env_ids(None, "all") == [t.env_id for t in list_tasks()]
     short = selected_env_ids(None, "short")

@@ -296,7 +296,7 @@ class Driver:
                 self._collect_record(task, [])
             return
         self.check_time(task, unit)
-        argv = self.cli(self.sim_python, "mikasa-collect", "mikasa_oracles.collect")
+        argv = self.cli(self.sim_python, "mikasa-collect", "mikasa_oracles.collect_cli")
         argv += ["--env-id", task, "--num-episodes", str(n), "--out", str(self.out / "data")]
         argv += ["--workers", str(self.a.workers), "--no-progress"]
         fresh = not self.npz_dir(task).is_dir()
