@@ -189,10 +189,13 @@ def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
     state = torch.load(resume_file, weights_only=False)
     assert (state["iteration"], state["global_step"]) == (1, 16)
     assert not any(tmp_path.rglob("final_ckpt.pt"))
-    ppo.main([*flags, "--resume", str(resume_file)])
+    ppo.main([*flags, "--resume", str(resume_file), "--learning-rate", "1e-4"])
     assert [p.relative_to(resume_file.parent).as_posix() for p in sorted(tmp_path.rglob("*.pt"))] == [
         "ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
-    assert torch.load(resume_file, weights_only=False)["global_step"] == 32
+    state = torch.load(resume_file, weights_only=False)
+    assert state["global_step"] == 32
+    # The resumed run went on at the command's learning rate, with the saved Adam moments.
+    assert [g["lr"] for g in state["optimizer"]["param_groups"]] == [1e-4]
     with pytest.raises(ValueError, match="env_id 'RememberColor3-v0'"):
         ppo.main(["--env-id", "RememberColor5-v0", "--include-state", *TINY, "--resume", str(resume_file)])
     with pytest.raises(FileNotFoundError, match="no such file"):

@@ -106,7 +106,7 @@ class PPOArgs:
     num_workers: int | None = None
     """env worker processes (default: one per CPU core, at most one per env); 0 = in this process"""
     resume: str | None = None
-    """a run's resume.pt: go on with that run (networks, optimizer, step counters, RNG, run directory)"""
+    """a run's resume.pt: go on with that run (networks, optimizer, step counters, RNG, run directory) at this --learning-rate"""
     time_limit: float | None = None
     """stop after the iteration that passes this many seconds, resume.pt saved (to chain time-limited jobs)"""
 
@@ -363,6 +363,11 @@ class Run:
         state = self.resumed
         agent.load_state_dict(state["agent"])
         optimizer.load_state_dict(state["optimizer"])
+        # The command's --learning-rate wins over the saved one (Adam's moments are kept): a
+        # run can go on at a lower rate, where a fresh optimizer from --checkpoint would
+        # first take full-size steps in every weight.
+        for group in optimizer.param_groups:
+            group["lr"] = self.args.learning_rate
         torch.set_rng_state(state["torch_rng"])
         np.random.set_state(state["numpy_rng"])
         self.saves, self.start_step = state["saves"], state["global_step"]
