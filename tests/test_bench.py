@@ -385,6 +385,8 @@ def test_wilson_interval_values(s, n, lo, hi):
 
 def test_wilson_edge_cases_and_newcombe():
     assert wilson_interval(0, 0) == (0.0, 1.0)
+    # Exactly 0 at 0/n and 1 at n/n (a validity flag compares the lower end with a chance of 0).
+    assert wilson_interval(0, 50)[0] == 0.0 and wilson_interval(50, 50)[1] == 1.0
     with pytest.raises(ValueError):
         wilson_interval(3, 2)
     d, lo, hi = newcombe_difference_interval(10, 10, 0, 10)

@@ -130,8 +130,10 @@ LEAKS: tuple[Leak, ...] = (
         "Hard 14/50 (the oracle 50/50); chance 0",
         status="open",
         fix="not fixed yet. TraceShape's fix (the lamp at a fixed spot) is not enough: the "
-        "button shows the centre too, and a fixed button would have to stay within the arm's "
-        "reach (the reference's is already at its edge in half the episodes) and more than its "
-        "6.5 cm press radius from every contour (a low TCP there ends the episode)",
+        "button shows the centre too, and a fixed button must stay within the arm's reach "
+        "(the reference's is already at its edge in half the episodes), in view, and more "
+        "than its 6.5 cm press radius from every contour (a low TCP there ends the episode): "
+        "beside the contours' region, e.g. at (-0.05, 0.38) (0.68 m from the base; contours "
+        "reach y <= 0.284); then a Monte Carlo chance with the shared guessed centre",
     ),
 )

@@ -33,8 +33,11 @@ def wilson_interval(successes: int, n: int, z: float = Z_95) -> tuple[float, flo
     denom = 1.0 + z2 / n
     center = (p + z2 / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / denom
-    # Clamp rounding noise: the exact interval always lies within [0, 1].
-    return max(0.0, center - half), min(1.0, center + half)
+    # The exact interval ends at 0 for 0/n and at 1 for n/n (the float arithmetic leaves
+    # ~1e-17 there, which would read as "above a chance of 0"); clamp rounding noise.
+    lower = 0.0 if successes == 0 else max(0.0, center - half)
+    upper = 1.0 if successes == n else min(1.0, center + half)
+    return lower, upper
 
 
 def newcombe_difference_interval(
