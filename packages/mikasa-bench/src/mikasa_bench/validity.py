@@ -257,6 +257,16 @@ def validity_markdown(
     missing = [e for e in canonical_env_ids() if e not in {r.env_id for r in rows}]
     if missing:
         out += [f"Canonical tasks without results ({len(missing)}): " + ", ".join(missing), ""]
+    covered = {
+        name: sum(1 for r in rows if r.tallies.get(key) is not None and r.tallies[key].n)
+        for key, name in POLICY_COLUMNS.items()
+    }
+    if any(n < len(rows) for n in covered.values()):
+        out += [
+            "Tasks with results per policy (— in a cell: none yet): "
+            + ", ".join(f"{name} {n}/{len(rows)}" for name, n in covered.items()),
+            "",
+        ]
     header = ["Task", "Chance", *POLICY_COLUMNS.values(), "Flags"]
     out += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in rows:
