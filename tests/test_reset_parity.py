@@ -6,7 +6,8 @@ Default run: proprio (TCP pose, gripper opening: the robot's noisy start pose) w
 and the same instruction, in state mode. Slow run: the rendered frames of the canonical VLA
 chain against the reference's (lavapipe): top camera within 6/255 mean abs error, and the
 wrist camera (2x2-averaged) within 1/255, which catches a misplaced object the top camera's
-6/255 lets through. Lamp tasks used a stand-in bulb in the reference: a few pixels differ.
+6/255 lets through (TraceShapeSeq, whose button stands elsewhere on purpose, is held to
+6/255 there too). Lamp tasks used a stand-in bulb in the reference: a few pixels differ.
 """
 
 from __future__ import annotations
@@ -28,6 +29,11 @@ TOP_MAE_TOL = 6.0  # mean abs error, 0-255 scale
 # On 2x2-averaged 64x64 images. Measured ≤ 0.4 here (the stored averages are rounded; stand-in
 # bulbs); a misplaced shape or 5 mm of cube jitter from a wrong draw order gave 1.3-1.8.
 WRIST_MAE_TOL = 1.0
+# Tasks with an object moved on purpose (packages/mikasa-envs/DEVIATIONS.md): the wrist camera
+# sees it elsewhere; these are held to the top camera's bound there too (measured 3.78).
+MOVED_BY_DESIGN = {
+    "TraceShapeSeq": "lamp and submit button at fixed spots, DEVIATIONS.md Fixed #26",
+}
 
 
 def proprio_diff(ours: np.ndarray, ref: list[float]) -> np.ndarray:
@@ -81,7 +87,9 @@ def test_reset_frames_match_reference(make_env, env_id):
     top = np.abs(rgb[..., :3].astype(np.float64) - top_ref).mean()
     wrist = np.abs(pool2(rgb[..., 3:]) - wrist_ref).mean()
     assert top < TOP_MAE_TOL, f"top camera mean abs error {top:.2f}/255"
-    assert wrist < WRIST_MAE_TOL, f"wrist camera mean abs error {wrist:.2f}/255 (2x2-averaged)"
+    moved = any(env_id.startswith(prefix) for prefix in MOVED_BY_DESIGN)
+    wrist_tol = TOP_MAE_TOL if moved else WRIST_MAE_TOL
+    assert wrist < wrist_tol, f"wrist camera mean abs error {wrist:.2f}/255 (2x2-averaged)"
 
 
 def test_blink_schedule_reproduces_the_specs_measured_example(make_env):

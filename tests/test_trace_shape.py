@@ -241,8 +241,14 @@ def test_seq_timeline_and_cue(make_env):
     torch.testing.assert_close(base.red_cube.pose.p[0, :2], base.waypoints[0, 0, -1])
     env.step(ZERO)
     torch.testing.assert_close(base.red_cube.pose.p[0, :2], base.waypoints[0, 1, 0])
-    # Button at lamp + (0.02, 0.16), drawn on the table.
-    torch.testing.assert_close(base.button_xy[0], base.lamp.position[0, :2] + torch.tensor([0.02, 0.16]))
+    # Lamp and button at fixed spots (they would show the centre), drawn on the table.
+    torch.testing.assert_close(base.lamp.position[0, :2], torch.tensor([0.2, 0.0]))
+    torch.testing.assert_close(base.button_xy[0], torch.tensor([-0.05, 0.38]))
+    # Clear of every contour the task can draw: the press radius of a TCP over the cube, and
+    # the button's base of the cube itself.
+    reach_y = base.CENTER_Y_RANGE[1] + base.SIZE_RANGE[1] * math.sqrt(2)
+    assert 0.38 - reach_y > base.BUTTON_PRESS_RADIUS
+    assert 0.38 - base.BUTTON_BASE_HALF_SIZE[1] > reach_y + base.CUBE_HALFSIZE
     assert base.button_top_z == pytest.approx(0.058)
 
 

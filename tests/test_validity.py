@@ -49,6 +49,9 @@ def test_chance_parameters_match_the_env_classes():
             assert f"-{cls.ACTIVE_BATTERIES}-VLA" in env_id
         elif family == "trace_shape":
             assert chance.TRACE_SHAPE_SETS[chance._variant(env_id, "TraceShape")] == cls.SHAPE_SET
+        elif family == "trace_shape_seq":
+            assert chance.TRACE_SHAPE_SETS[chance._variant(env_id, "TraceShapeSeq")] == cls.SHAPE_SET
+            assert chance.TRACE_SHAPE_SEQ_LENGTHS == cls.SEQUENCE_LEN_RANGE
 
 
 def test_trace_shape_chance_is_the_guess_rate_the_table_gives():
@@ -58,6 +61,10 @@ def test_trace_shape_chance_is_the_guess_rate_the_table_gives():
         expected = chance.TRACE_SHAPE_GUESS_RATES[variant]
         assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 20_000) ** 0.5)
     assert task_chance("TraceShapeEasy-VLA-v0").rate == pytest.approx(0.0597)
+    expected = chance.TRACE_SHAPE_SEQ_GUESS_RATES["Easy"]
+    rate = chance.trace_shape_guess_rate((0,), samples=20_000, seed=1, lengths=chance.TRACE_SHAPE_SEQ_LENGTHS,
+                                         shapes_shown=True)
+    assert rate == pytest.approx(expected, abs=max(4 * (expected * (1 - expected) / 20_000) ** 0.5, 5e-4))
 
 
 def test_rotate_threshold_is_the_env_default():

@@ -7,10 +7,10 @@ than chance shows its answer without memory (a leak).
 * Tasks with a discrete answer: the success of a uniform guess among the candidates the
   agent sees when it must act (1/N objects, mugs, buttons or counts; 1/C(9, L) colour sets,
   1/P(9, L) colour sequences). For TakeItBack the candidates are the three start rows.
-* Tasks without a discrete answer, each justified in its reason: Intercept*,
-  TraceShapeSeq* (a continuous answer that is never seen without memory: chance 0, any
-  success is a leak), TraceShape* (a contour guessed from the task's prior — shape, centre,
-  size, rotation — passes every checkpoint of the true one at a rate computed by
+* Tasks without a discrete answer, each justified in its reason: Intercept* (a continuous
+  velocity that one frame does not show: chance 0, any success is a leak), TraceShape* and
+  TraceShapeSeq* (contours guessed from the task's prior — centre, size, rotation, the shape
+  unless shown — pass every checkpoint of the true ones at a rate computed by
   ``trace_shape_guess_rate``), Rotate* (a continuous start heading: the success window's share of it),
   TimedTransfer* (a time: the best a policy without a clock gets by descending with a
   constant probability per step), BatteriesChecker* (a checklist: the chance that
@@ -77,6 +77,10 @@ BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_
 # test recomputes it with fewer).
 TRACE_SHAPE_SETS: dict[str, tuple[int, ...]] = {"Easy": (0,), "Medium": (0, 1), "Hard": (0, 1, 2)}
 TRACE_SHAPE_GUESS_RATES: dict[str, float] = {"Easy": 0.0597, "Medium": 0.0312, "Hard": 0.0177}
+# TraceShapeSeq: SEQUENCE_LEN_RANGE; variant -> trace_shape_guess_rate(SHAPE_SET, lengths=...,
+# shapes_shown=True) (200,000 samples, seed 0).
+TRACE_SHAPE_SEQ_LENGTHS = (2, 5)
+TRACE_SHAPE_SEQ_GUESS_RATES: dict[str, float] = {"Easy": 0.0178, "Medium": 0.0062, "Hard": 0.0049}
 
 
 
@@ -140,38 +144,56 @@ def coupon_chance(n: int, draws: int) -> float:
     return sum((-1) ** j * math.comb(n, j) * ((n - j) / n) ** draws for j in range(n + 1))
 
 
-def trace_shape_guess_rate(shape_set: tuple[int, ...], samples: int = 200_000, seed: int = 0) -> float:
-    """Monte Carlo chance of TraceShape with ``shape_set``: the share of episodes in which a
-    contour guessed from the task's prior (shape, centre, size and rotation drawn as the env
-    draws them), traced along its checkpoints and back to the first, passes within the
-    checkpoint radius of every true checkpoint (which also closes the true contour). Imports
-    the env module for its geometry."""
+def trace_shape_guess_rate(
+    shape_set: tuple[int, ...],
+    samples: int = 200_000,
+    seed: int = 0,
+    lengths: tuple[int, int] = (1, 1),
+    shapes_shown: bool = False,
+) -> float:
+    """Monte Carlo chance of TraceShape (``lengths`` (1, 1)) or TraceShapeSeq (``lengths``
+    its sequence-length range, ``shapes_shown``: the shapes are in ``task_cue``): the share
+    of episodes in which contours guessed from the task's prior — one centre for all,
+    per element a size, a rotation and (unless shown) a shape, drawn as the env draws them —
+    traced along their checkpoints and back to the first, pass within the checkpoint radius
+    of every true checkpoint of every element (which also closes each true contour).
+    Imports the env module for its geometry."""
     import numpy as np
     import torch
     from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
     from mikasa_envs.tasks._trace_shape import checkpoints_of, shape_waypoints
 
     rng = np.random.default_rng(seed)
+    elements = lengths[1]
 
-    def draw_checkpoints(n: int) -> np.ndarray:
-        shapes = torch.as_tensor(rng.choice(shape_set, n))
+    def draw_checkpoints(n: int, shapes: np.ndarray) -> np.ndarray:
+        """(n, elements, 12, 2) checkpoints about one drawn centre per sample."""
         centres = np.stack([rng.uniform(*env.CENTER_X_RANGE, n), rng.uniform(*env.CENTER_Y_RANGE, n)], -1)
-        sizes, rotations = rng.uniform(*env.SIZE_RANGE, n), rng.uniform(0.0, 2 * math.pi, n)
+        sizes = rng.uniform(*env.SIZE_RANGE, (n, elements))
+        rotations = rng.uniform(0.0, 2 * math.pi, (n, elements))
         waypoints = shape_waypoints(
-            shapes, *(torch.as_tensor(a, dtype=torch.float32) for a in (centres, sizes, rotations))
+            torch.as_tensor(shapes),
+            torch.as_tensor(np.repeat(centres[:, None], elements, axis=1), dtype=torch.float32),
+            torch.as_tensor(sizes, dtype=torch.float32),
+            torch.as_tensor(rotations, dtype=torch.float32),
         )
         return checkpoints_of(waypoints).double().numpy()
 
     passed = 0
     for start in range(0, samples, 10_000):
         n = min(10_000, samples - start)
-        truth, guess = draw_checkpoints(n), draw_checkpoints(n)
+        count = rng.integers(lengths[0], lengths[1] + 1, n)
+        true_shapes = rng.choice(shape_set, (n, elements))
+        guessed_shapes = true_shapes if shapes_shown else rng.choice(shape_set, (n, elements))
+        truth, guess = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
         # The guessed trace: straight moves between its checkpoints, closed, 16 points a move.
-        ends = np.roll(guess, -1, axis=1)
-        steps = np.linspace(0.0, 1.0, 16, endpoint=False)[None, None, :, None]
-        trace = (guess[:, :, None] + (ends - guess)[:, :, None] * steps).reshape(n, -1, 2)
-        distance = np.linalg.norm(truth[:, :, None] - trace[:, None], axis=-1).min(axis=-1)
-        passed += int((distance < env.CHECKPOINT_RADIUS).all(axis=-1).sum())
+        ends = np.roll(guess, -1, axis=2)
+        steps = np.linspace(0.0, 1.0, 16, endpoint=False)[:, None]
+        trace = (guess[:, :, :, None] + (ends - guess)[:, :, :, None] * steps).reshape(n, elements, -1, 2)
+        distance = np.linalg.norm(truth[:, :, :, None] - trace[:, :, None], axis=-1).min(axis=-1)
+        element_ok = (distance < env.CHECKPOINT_RADIUS).all(axis=-1)
+        in_sequence = np.arange(elements) < count[:, None]
+        passed += int((element_ok | ~in_sequence).all(axis=-1).sum())
     return passed / samples
 
 
@@ -243,10 +265,13 @@ def task_chance(env_id: str) -> Chance:
             "rate (the 3.5 cm radius forgives a near guess)",
         )
     if family == "trace_shape_seq":
+        variant = _variant(env_id, "TraceShapeSeq")
+        lo, hi = TRACE_SHAPE_SEQ_LENGTHS
         return Chance(
-            0.0,
-            "0: no discrete answer; the contours' size and rotation are continuous and never "
-            "shown again, so any success without memory is a leak",
+            TRACE_SHAPE_SEQ_GUESS_RATES[variant],
+            f"no discrete answer; {lo}-{hi} contours about one centre, their shapes shown in "
+            "task_cue: contours guessed from the prior (centre, sizes, rotations) pass every "
+            "checkpoint of all of them at this rate",
         )
     raise ValueError(f"no chance rate for {env_id!r} (family {family!r})")
 

@@ -35,7 +35,9 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     (independent, uniform over the variant's set); one centre x ~ U[−0.15, −0.05),
     y ~ U[−0.10, 0.10) for all elements; per element size R ~ U[0.078, 0.13) and rotation
     θ ~ U[0, 2π); the pre-demo length (3-8 steps); arm joint noise. The green cube starts
-    0.16 m behind the centre, the lamp 0.25 m beyond it, the button at lamp + (0.02, 0.16).
+    0.16 m behind the centre. The lamp stands at (0.2, 0) and the button at (−0.05, 0.38) in
+    every episode: the reference puts them at centre + (0.25, 0) and + (0.27, 0.16), which
+    show a policy without memory where the contours lie (DEVIATIONS.md).
 
     **Success Conditions:** only the active element is scored: its 12 checkpoints latch when
     the green cube's centre passes within 3.5 cm (XY); once all are visited and the cube is
@@ -60,6 +62,12 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     BUTTON_BASE_RGBA: ClassVar[tuple[int, int, int, int]] = (55, 64, 78, 255)
     BUTTON_CAP_RGBA: ClassVar[tuple[int, int, int, int]] = (210, 80, 80, 255)
     BUTTON_OFFSET_FROM_LAMP: ClassVar[tuple[float, float]] = (0.02, 0.16)
+    # Fixed spots instead of the reference's centre-relative ones (None: lamp + the offset).
+    # The button sits beside the contours' region (y <= 0.284), its base more than a cube's
+    # width clear of them and its 6.5 cm press radius clear of a TCP over any contour, in
+    # view, 0.68 m from the robot's base (within a top-down press's reach of ~0.8 m).
+    LAMP_POSITION = (0.2, 0.0)
+    BUTTON_POSITION: ClassVar[tuple[float, float] | None] = (-0.05, 0.38)
     BUTTON_PRESS_RADIUS: ClassVar[float] = 0.065
     # Where the reward's button-reach term aims the TCP: (button XY, this height).
     BUTTON_REACH_Z: ClassVar[float] = 0.063
@@ -142,8 +150,12 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
 
     def _place_fixtures(self, env_idx: torch.Tensor, centre: torch.Tensor) -> None:
         super()._place_fixtures(env_idx, centre)
-        offset = torch.tensor(self.BUTTON_OFFSET_FROM_LAMP, device=self.device)
-        self.button.place(env_idx, self.lamp.position[env_idx, :2] + offset)
+        if self.BUTTON_POSITION is None:
+            offset = torch.tensor(self.BUTTON_OFFSET_FROM_LAMP, device=self.device)
+            self.button.place(env_idx, self.lamp.position[env_idx, :2] + offset)
+        else:
+            xy = torch.tensor(self.BUTTON_POSITION, device=self.device).expand(len(env_idx), 2)
+            self.button.place(env_idx, xy)
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         super()._on_episode_start(env_idx)
