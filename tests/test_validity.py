@@ -60,11 +60,11 @@ def test_trace_shape_chance_is_the_guess_rate_the_table_gives():
         rate = chance.trace_shape_guess_rate(chance.TRACE_SHAPE_SETS[variant], samples=20_000, seed=1)
         expected = chance.TRACE_SHAPE_GUESS_RATES[variant]
         assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 20_000) ** 0.5)
-    assert task_chance("TraceShapeEasy-VLA-v0").rate == pytest.approx(0.0597)
+    assert task_chance("TraceShapeEasy-VLA-v0").rate == pytest.approx(0.0645)
     expected = chance.TRACE_SHAPE_SEQ_GUESS_RATES["Easy"]
-    rate = chance.trace_shape_guess_rate((0,), samples=20_000, seed=1, lengths=chance.TRACE_SHAPE_SEQ_LENGTHS,
+    rate = chance.trace_shape_guess_rate((0,), samples=10_000, seed=1, lengths=chance.TRACE_SHAPE_SEQ_LENGTHS,
                                          shapes_shown=True)
-    assert rate == pytest.approx(expected, abs=max(4 * (expected * (1 - expected) / 20_000) ** 0.5, 5e-4))
+    assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 10_000) ** 0.5)
 
 
 def test_rotate_threshold_is_the_env_default():

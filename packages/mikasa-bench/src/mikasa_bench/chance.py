@@ -73,14 +73,14 @@ TAKE_IT_BACK_RADIUS = 0.08
 # the oracle, measured (Easy-3 / Easy-6: 247-248 / 502-504 steps for 3 / 6 cycles, Hard-3:
 # 427-430 for 3; the memoryless oracle's cycles took 79-88 steps on Easy-3).
 BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_checker_hard": 143}
-# TraceShape variant -> `trace_shape_guess_rate(SHAPE_SET)` (200,000 samples, seed 0; the
+# TraceShape variant -> `trace_shape_guess_rate(SHAPE_SET)` (100,000 samples, seed 0; the
 # test recomputes it with fewer).
 TRACE_SHAPE_SETS: dict[str, tuple[int, ...]] = {"Easy": (0,), "Medium": (0, 1), "Hard": (0, 1, 2)}
-TRACE_SHAPE_GUESS_RATES: dict[str, float] = {"Easy": 0.0597, "Medium": 0.0312, "Hard": 0.0177}
+TRACE_SHAPE_GUESS_RATES: dict[str, float] = {"Easy": 0.0645, "Medium": 0.0358, "Hard": 0.0228}
 # TraceShapeSeq: SEQUENCE_LEN_RANGE; variant -> trace_shape_guess_rate(SHAPE_SET, lengths=...,
-# shapes_shown=True) (200,000 samples, seed 0).
+# shapes_shown=True) (100,000 samples, seed 0).
 TRACE_SHAPE_SEQ_LENGTHS = (2, 5)
-TRACE_SHAPE_SEQ_GUESS_RATES: dict[str, float] = {"Easy": 0.0178, "Medium": 0.0062, "Hard": 0.0049}
+TRACE_SHAPE_SEQ_GUESS_RATES: dict[str, float] = {"Easy": 0.0191, "Medium": 0.0070, "Hard": 0.0060}
 
 
 
@@ -155,9 +155,10 @@ def trace_shape_guess_rate(
     its sequence-length range, ``shapes_shown``: the shapes are in ``task_cue``): the share
     of episodes in which contours guessed from the task's prior — one centre for all,
     per element a size, a rotation and (unless shown) a shape, drawn as the env draws them —
-    traced along their checkpoints and back to the first, pass within the checkpoint radius
-    of every true checkpoint of every element (which also closes each true contour).
-    Imports the env module for its geometry."""
+    traced as a policy would (a straight move from where the cube is — its start spot, then
+    the previous contour's start — to the guessed start, then along the guessed checkpoints
+    and back), pass within the checkpoint radius of every true checkpoint of every element
+    (which also closes each true contour). Imports the env module for its geometry."""
     import numpy as np
     import torch
     from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
@@ -166,8 +167,8 @@ def trace_shape_guess_rate(
     rng = np.random.default_rng(seed)
     elements = lengths[1]
 
-    def draw_checkpoints(n: int, shapes: np.ndarray) -> np.ndarray:
-        """(n, elements, 12, 2) checkpoints about one drawn centre per sample."""
+    def draw_checkpoints(n: int, shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, elements, 12, 2) checkpoints about one drawn centre per sample, and the centres."""
         centres = np.stack([rng.uniform(*env.CENTER_X_RANGE, n), rng.uniform(*env.CENTER_Y_RANGE, n)], -1)
         sizes = rng.uniform(*env.SIZE_RANGE, (n, elements))
         rotations = rng.uniform(0.0, 2 * math.pi, (n, elements))
@@ -177,7 +178,7 @@ def trace_shape_guess_rate(
             torch.as_tensor(sizes, dtype=torch.float32),
             torch.as_tensor(rotations, dtype=torch.float32),
         )
-        return checkpoints_of(waypoints).double().numpy()
+        return checkpoints_of(waypoints).double().numpy(), centres
 
     passed = 0
     for start in range(0, samples, 10_000):
@@ -185,11 +186,14 @@ def trace_shape_guess_rate(
         count = rng.integers(lengths[0], lengths[1] + 1, n)
         true_shapes = rng.choice(shape_set, (n, elements))
         guessed_shapes = true_shapes if shapes_shown else rng.choice(shape_set, (n, elements))
-        truth, guess = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
-        # The guessed trace: straight moves between its checkpoints, closed, 16 points a move.
-        ends = np.roll(guess, -1, axis=2)
+        (truth, centres), (guess, _) = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
+        # Per element the route: from where the cube is to the guessed start, then round the
+        # guessed checkpoints and back; straight moves, 16 points each.
+        cube_start = centres + np.asarray(env.GREEN_CUBE_OFFSET)
+        previous = np.concatenate([cube_start[:, None], guess[:, :-1, 0]], axis=1)
+        route = np.concatenate([previous[:, :, None], guess, guess[:, :, :1]], axis=2)
         steps = np.linspace(0.0, 1.0, 16, endpoint=False)[:, None]
-        trace = (guess[:, :, :, None] + (ends - guess)[:, :, :, None] * steps).reshape(n, elements, -1, 2)
+        trace = (route[:, :, :-1, None] + np.diff(route, axis=2)[:, :, :, None] * steps).reshape(n, elements, -1, 2)
         distance = np.linalg.norm(truth[:, :, :, None] - trace[:, :, None], axis=-1).min(axis=-1)
         element_ok = (distance < env.CHECKPOINT_RADIUS).all(axis=-1)
         in_sequence = np.arange(elements) < count[:, None]

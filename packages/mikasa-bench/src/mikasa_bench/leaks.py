@@ -95,7 +95,7 @@ LEAKS: tuple[Leak, ...] = (
         "Monte Carlo of such guesses passes 90 % of Easy episodes. After the fix (50 canonical "
         "seeds): the memoryless oracle (centre guessed from its range too) 5/50, 1/50, 1/50 "
         "on Easy, Medium, Hard against chance (a contour guessed from the prior, "
-        "mikasa_bench.chance) 6.0 / 3.1 / 1.8 %",
+        "mikasa_bench.chance) 6.5 / 3.6 / 2.3 %",
         status="closed",
         fix="the lamp stands at a fixed spot, (0.2, 0), for every episode; draws and scoring "
         "are unchanged, and the seed-0 reset frames still match the reference's (top camera "
@@ -122,19 +122,21 @@ LEAKS: tuple[Leak, ...] = (
     ),
     Leak(
         tasks="TraceShapeSeq{Easy,Medium,Hard}",
-        leak="the lamp (centre + (0.25, 0)) and the submit button (centre + (0.27, 0.16)) show "
+        leak="the lamp (centre + (0.25, 0)) and the submit button (centre + (0.27, 0.16)) showed "
         "the common centre of the contours all episode, and the shapes themselves are in "
         "task_cue (part of the VLA observation, published contract): only sizes and rotations "
-        "are hidden, and circles about the centre at a guessed size pass as in TraceShape",
+        "were hidden, and circles about the centre at a guessed size pass as in TraceShape",
         evidence="memoryless oracle (the cue's shapes, guessed sizes and rotations about the "
-        "centre the lamp shows), 50 canonical seeds, state obs: Easy 35/50, Medium 15/50, "
-        "Hard 14/50 (the oracle 50/50); chance 0",
-        status="open",
-        fix="not fixed yet. TraceShape's fix (the lamp at a fixed spot) is not enough: the "
-        "button shows the centre too, and a fixed button must stay within the arm's reach "
-        "(the reference's is already at its edge in half the episodes), in view, and more "
-        "than its 6.5 cm press radius from every contour (a low TCP there ends the episode): "
-        "beside the contours' region, e.g. at (-0.05, 0.38) (0.68 m from the base; contours "
-        "reach y <= 0.284); then a Monte Carlo chance with the shared guessed centre",
+        "centre the lamp showed), 50 canonical seeds, state obs: Easy 35/50, Medium 15/50, "
+        "Hard 14/50 (the oracle 50/50). After the fix: 3/50, 0/50, 0/50 (the oracle 50/50) "
+        "against chance 1.9 / 0.7 / 0.6 % (contours guessed from the prior with the shown "
+        "shapes, mikasa_bench.chance); Easy's interval starts at 2.1 %, at the edge: the "
+        "memoryless oracle goes on tracing its later guesses about the same centre while an "
+        "earlier contour is still the active one, chances the guess-rate model does not count",
+        status="closed",
+        fix="the lamp stands at (0.2, 0) and the button at (-0.05, 0.38) in every episode: "
+        "beside every contour the task can draw (y <= 0.284), clear of the press radius and "
+        "within reach; draws and scoring unchanged",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #26",
     ),
 )
