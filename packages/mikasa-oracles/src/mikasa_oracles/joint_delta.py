@@ -33,6 +33,8 @@ from mani_skill.utils.geometry.rotation_conversions import (
     quaternion_multiply,
 )
 
+from mikasa_oracles.rollout import reset_with_seed
+
 EE_CONTROL_MODE = "pd_ee_delta_pose"
 # CLIK iterations, as ManiSkill's controller (more do not rescue unreachable targets).
 IK_ITERATIONS = 100
@@ -384,12 +386,7 @@ class JointDeltaOracle:
     def reset(self, seed: int | None = None) -> None:
         """Reset the inner oracle for a new episode; ``seed`` (the episode seed) reaches an
         inner oracle whose ``reset`` takes one (a memoryless oracle seeds its guesses)."""
-        from mikasa_oracles.rollout import reset_with_seed
-
-        if seed is None:
-            self.oracle.reset()
-        else:
-            reset_with_seed(self.oracle, seed)
+        reset_with_seed(self.oracle, seed)
 
     def forward(self, obs: Any) -> np.ndarray:
         """The inner oracle's action for ``obs``, as an (8,) float32 joint-delta action."""

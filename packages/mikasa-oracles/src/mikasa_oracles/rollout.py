@@ -42,7 +42,7 @@ class Rollout:
     episode_return: float
 
 
-def reset_with_seed(policy: Any, seed: int) -> None:
+def reset_with_seed(policy: Any, seed: int | None) -> None:
     """``policy.reset(seed=seed)`` where ``reset`` takes a seed (e.g. a memoryless oracle,
     whose guesses it seeds), else ``policy.reset()``; no-op for a policy without ``reset``.
     (mikasa-bench's ``reset_policy`` is this function.)"""
