@@ -170,13 +170,25 @@ def test_lstm_trainer_rejects(ppo_lstm, tmp_path, monkeypatch, flags, error, mat
         ppo_lstm.main(["--env-id", ENV_ID, *flags, "--no-capture-video"])
 
 
-def test_shipped_state_checkpoint_solves_its_task(ppo, tmp_path, monkeypatch):
-    # RESULTS.md: 1.00 over 96 episodes on the GPU machine, 64/64 on the 2-core machine.
+# Each shipped checkpoint with its task's horizon (one eval episode per env). RESULTS.md:
+# RememberColor3-v0 1.00 over 96 episodes, ShellGameTouch-v0 0.93 over 256.
+SHIPPED_HORIZONS = {"RememberColor3-v0": 60, "ShellGameTouch-v0": 90}
+
+
+def test_every_shipped_checkpoint_is_tested():
+    shipped = ROOT / "legacy/rl/baselines/checkpoints"
+    assert sorted(p.parent.name for p in shipped.glob("*/final_ckpt.pt")) == sorted(SHIPPED_HORIZONS)
+
+
+@pytest.mark.parametrize("env_id", sorted(SHIPPED_HORIZONS))
+def test_shipped_state_checkpoint_solves_its_task(ppo, tmp_path, monkeypatch, env_id):
     monkeypatch.chdir(tmp_path)
-    checkpoint = ROOT / "legacy/rl/baselines/checkpoints" / ENV_ID / "final_ckpt.pt"
-    result = ppo.main(["--env-id", ENV_ID, "--include-state", "--evaluate", "--checkpoint", str(checkpoint),
-                       "--num-eval-envs", "4", "--num-eval-steps", "60", "--num-workers", "0", "--no-capture-video"])
-    assert result["episodes"] == 4 and result["success_once"] == 1.0
+    checkpoint = ROOT / "legacy/rl/baselines/checkpoints" / env_id / "final_ckpt.pt"
+    result = ppo.main(["--env-id", env_id, "--include-state", "--evaluate", "--checkpoint", str(checkpoint),
+                       "--num-eval-envs", "4", "--num-eval-steps", str(SHIPPED_HORIZONS[env_id]),
+                       "--num-workers", "0", "--no-capture-video"])
+    # A policy at 0.93 may miss one of four episodes; a broken checkpoint or env misses most.
+    assert result["episodes"] == 4 and result["success_once"] >= 0.75
 
 
 def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
