@@ -92,11 +92,13 @@ def test_timeline_lamp_and_demonstrator(make_env):
     assert 3 <= pre <= 8 and cue == pre + NUM_WAYPOINTS == pre + int(base.demo_steps_per_env[0])
     waypoints = base.waypoints[0]
     centre = base.shape_centre[0].clone()
-    np.testing.assert_allclose(base.green_cube.pose.p[0], [centre[0] - 0.16, centre[1], 0.02], atol=1e-5)
-    # The lamp stands at a fixed spot: it does not show where the contour is (DEVIATIONS.md).
+    # The green cube and the lamp stand at fixed spots: they do not show where the contour
+    # is (DEVIATIONS.md Fixed #26, #27).
+    np.testing.assert_allclose(base.green_cube.pose.p[0], [-0.26, 0.0, 0.02], atol=1e-5)
     np.testing.assert_allclose(base.lamp.position[0], [0.2, 0.0, 0.0], atol=1e-6)
     env.reset(seed=12)
     assert not torch.allclose(base.shape_centre[0], centre)
+    np.testing.assert_allclose(base.green_cube.pose.p[0], [-0.26, 0.0, 0.02], atol=1e-5)
     np.testing.assert_allclose(base.lamp.position[0], [0.2, 0.0, 0.0], atol=1e-6)
     _, info = env.reset(seed=11)
     seen = []
@@ -241,7 +243,8 @@ def test_seq_timeline_and_cue(make_env):
     torch.testing.assert_close(base.red_cube.pose.p[0, :2], base.waypoints[0, 0, -1])
     env.step(ZERO)
     torch.testing.assert_close(base.red_cube.pose.p[0, :2], base.waypoints[0, 1, 0])
-    # Lamp and button at fixed spots (they would show the centre), drawn on the table.
+    # Green cube, lamp and button at fixed spots (they would show the centre), on the table.
+    torch.testing.assert_close(base.green_cube.pose.p[0, :2], torch.tensor([-0.26, 0.0]))
     torch.testing.assert_close(base.lamp.position[0, :2], torch.tensor([0.2, 0.0]))
     torch.testing.assert_close(base.button_xy[0], torch.tensor([-0.05, 0.38]))
     # Clear of every contour the task can draw: the press radius of a TCP over the cube, and

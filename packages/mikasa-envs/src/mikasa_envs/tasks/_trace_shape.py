@@ -114,12 +114,13 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     CENTER_X_RANGE: ClassVar[tuple[float, float]] = (-0.15, -0.05)
     CENTER_Y_RANGE: ClassVar[tuple[float, float]] = (-0.10, 0.10)
     SIZE_RANGE: ClassVar[tuple[float, float]] = (0.078, 0.13)
-    # Offsets from the shape centre (XY).
+    # The reference's offsets from the shape centre (XY).
     GREEN_CUBE_OFFSET: ClassVar[tuple[float, float]] = (-0.16, 0.0)
     LAMP_OFFSET: ClassVar[tuple[float, float]] = (0.25, 0.0)
-    # A fixed world XY for the lamp instead of centre + LAMP_OFFSET (None: the offset). A lamp
-    # that follows the centre shows where the contour is all episode (TraceShape sets it).
+    # Fixed world XYs instead of centre + offset (None: the offset). A lamp or a green cube
+    # that follows the centre shows where the contours are (both families set them).
     LAMP_POSITION: ClassVar[tuple[float, float] | None] = None
+    GREEN_CUBE_POSITION: ClassVar[tuple[float, float] | None] = None
     # Pre-demo length P ~ uniform int [lo, hi]; the demo shows one waypoint per step.
     PRE_DEMO_STEPS: ClassVar[tuple[int, int]] = (3, 8)
     CHECKPOINT_RADIUS: ClassVar[float] = 0.035
@@ -211,10 +212,13 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         self._place_fixtures(env_idx, centre)
 
     def _place_fixtures(self, env_idx: torch.Tensor, centre: torch.Tensor) -> None:
-        """Green cube (at rest, identity rotation) and lamp (white) around the shape centre."""
+        """Green cube (at rest, identity rotation) and lamp (white), at their fixed spots or about the centre."""
         b = len(env_idx)
         cube = torch.zeros(b, 3, device=self.device)
-        cube[:, :2] = centre + torch.tensor(self.GREEN_CUBE_OFFSET, device=self.device)
+        if self.GREEN_CUBE_POSITION is None:
+            cube[:, :2] = centre + torch.tensor(self.GREEN_CUBE_OFFSET, device=self.device)
+        else:
+            cube[:, :2] = torch.tensor(self.GREEN_CUBE_POSITION, device=self.device)
         cube[:, 2] = self.CUBE_HALFSIZE
         self.green_cube.set_pose(Pose.create(positions_to_poses(cube)))
         zeros = torch.zeros(b, 3, device=self.device)

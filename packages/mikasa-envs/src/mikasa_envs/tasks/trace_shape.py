@@ -24,10 +24,11 @@ class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
 
     **Randomizations:** the shape (uniform over the variant's set); the shape centre
     x ~ U[−0.15, −0.05), y ~ U[−0.10, 0.10), size R ~ U[0.078, 0.13) and rotation
-    θ ~ U[0, 2π); the pre-demo length (3-8 steps); arm joint noise. The green cube starts
-    0.16 m behind the centre (−x). The lamp stands at a fixed spot, (0.2, 0), where the
-    reference's lamp, 0.25 m beyond the centre, stands at most: there it showed a policy
-    without memory where the contour lies all episode (DEVIATIONS.md).
+    θ ~ U[0, 2π); the pre-demo length (3-8 steps); arm joint noise. The green cube starts at
+    a fixed spot, (−0.26, 0), where the reference's cube, 0.16 m behind the centre, starts on
+    average, and the lamp stands at (0.2, 0), where the reference's lamp, 0.25 m beyond the
+    centre, stands at most: placed about the centre, each showed a policy without memory
+    where the contour lies (DEVIATIONS.md).
 
     **Success Conditions:** in the action phase, the green cube's centre has come within
     3.5 cm (XY) of each of the 12 checkpoints (waypoints 0, 5, …, 55) and is now within
@@ -44,6 +45,9 @@ class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
     # checkpoint in 90 % of Easy episodes without memory). x = 0.2 keeps the lamp's base
     # (±0.022) clear of the largest contour (x ≤ 0.134) and the cube on it, as the offset did.
     LAMP_POSITION = (0.2, 0.0)
+    # Centre + (−0.16, 0) would show the centre too, until the cube is picked up (the
+    # memoryless oracle with the centre read off the cube: Easy 10/10, Medium and Hard 4/10).
+    GREEN_CUBE_POSITION = (-0.26, 0.0)
     CUE_PHASE_STEPS = (3 + NUM_WAYPOINTS, 8 + NUM_WAYPOINTS)
 
     # ------------------------------------------------- per-element views (E = 1)

@@ -34,9 +34,9 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     **Randomizations:** the sequence length L ~ U{2..5} and each element's shape
     (independent, uniform over the variant's set); one centre x ~ U[−0.15, −0.05),
     y ~ U[−0.10, 0.10) for all elements; per element size R ~ U[0.078, 0.13) and rotation
-    θ ~ U[0, 2π); the pre-demo length (3-8 steps); arm joint noise. The green cube starts
-    0.16 m behind the centre. The lamp stands at (0.2, 0) and the button at (−0.05, 0.38) in
-    every episode: the reference puts them at centre + (0.25, 0) and + (0.27, 0.16), which
+    θ ~ U[0, 2π); the pre-demo length (3-8 steps); arm joint noise. The green cube starts at
+    (−0.26, 0), the lamp stands at (0.2, 0) and the button at (−0.05, 0.38) in every episode:
+    the reference puts them at centre + (−0.16, 0), + (0.25, 0) and + (0.27, 0.16), which
     show a policy without memory where the contours lie (DEVIATIONS.md).
 
     **Success Conditions:** only the active element is scored: its 12 checkpoints latch when
@@ -67,6 +67,7 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     # width clear of them and its 6.5 cm press radius clear of a TCP over any contour, in
     # view, 0.68 m from the robot's base (within a top-down press's reach of ~0.8 m).
     LAMP_POSITION = (0.2, 0.0)
+    GREEN_CUBE_POSITION = (-0.26, 0.0)  # centre + (−0.16, 0) showed it until the cube was picked up
     BUTTON_POSITION: ClassVar[tuple[float, float] | None] = (-0.05, 0.38)
     BUTTON_PRESS_RADIUS: ClassVar[float] = 0.065
     # Where the reward's button-reach term aims the TCP: (button XY, this height).
