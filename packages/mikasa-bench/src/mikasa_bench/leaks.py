@@ -139,4 +139,20 @@ LEAKS: tuple[Leak, ...] = (
         "within reach; draws and scoring unchanged",
         reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #26",
     ),
+    Leak(
+        tasks="TraceShape{Easy,Medium,Hard}, TraceShapeSeq{Easy,Medium,Hard}",
+        leak="the green cube started 0.16 m behind the contours' centre (centre + (-0.16, 0)): "
+        "the frame at the start of the action phase, before the cube is picked up, showed the "
+        "centre as the lamp had",
+        evidence="a probe: the memoryless oracle with the centre read off the cube (guessed "
+        "sizes and rotations; Seq: the cue's shapes), seeds 4242424242+0..9, state obs: "
+        "TraceShape Easy/Medium/Hard 10, 4, 4 of 10; TraceShapeSeq 7, 3, 5 of 10. After the "
+        "fix the same probe: TraceShapeEasy 1/10, TraceShapeSeqEasy 0/10; over 50 canonical "
+        "seeds the memoryless oracle (centre guessed from its range) 5, 1, 1 and 3, 0, 0 of 50, "
+        "the oracle 50/50 on all six",
+        status="closed",
+        fix="the green cube starts at a fixed spot, (-0.26, 0), where the reference's cube "
+        "starts on average; draws and scoring unchanged",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #27",
+    ),
 )
