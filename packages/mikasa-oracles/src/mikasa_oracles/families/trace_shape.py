@@ -237,10 +237,7 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
         rng = self.guess_rng(len(shapes), 1)
         sizes = rng.uniform(*base.SIZE_RANGE, size=len(shapes))
         rotations = rng.uniform(0.0, 2 * np.pi, size=len(shapes))
-        if base.LAMP_POSITION is None:  # the lamp follows the centre
-            centre = base.lamp.position[0, :2].cpu().numpy().astype(np.float64) - np.asarray(base.LAMP_OFFSET)
-        else:
-            centre = np.array([rng.uniform(*base.CENTER_X_RANGE), rng.uniform(*base.CENTER_Y_RANGE)])
+        centre = self.guessed_centre(rng)
         waypoints = shape_waypoints(
             torch.as_tensor(shapes, dtype=torch.long),
             torch.as_tensor(np.tile(centre, (len(shapes), 1)), dtype=torch.float32),
@@ -248,6 +245,13 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
             torch.as_tensor(rotations, dtype=torch.float32),
         )
         return [c.astype(np.float64) for c in checkpoints_of(waypoints).numpy()]
+
+    def guessed_centre(self, rng: np.random.Generator) -> np.ndarray:
+        """The contours' centre: read off a lamp that follows it, else drawn from the prior."""
+        base = self.base
+        if base.LAMP_POSITION is None:  # the lamp follows the centre
+            return base.lamp.position[0, :2].cpu().numpy().astype(np.float64) - np.asarray(base.LAMP_OFFSET)
+        return np.array([rng.uniform(*base.CENTER_X_RANGE), rng.uniform(*base.CENTER_Y_RANGE)])
 
     def _element_closed(self, element: int) -> bool:
         return False
