@@ -77,11 +77,11 @@ BATTERY_CYCLE_STEPS: dict[str, int] = {"batteries_checker_easy": 84, "batteries_
 # test recomputes it with fewer).
 TRACE_SHAPE_SETS: dict[str, tuple[int, ...]] = {"Easy": (0,), "Medium": (0, 1), "Hard": (0, 1, 2)}
 TRACE_SHAPE_GUESS_RATES: dict[str, float] = {"Easy": 0.0643, "Medium": 0.0358, "Hard": 0.0226}
+# Both trace families: where the green cube starts (GREEN_CUBE_POSITION), the guessed route's start.
+TRACE_SHAPE_CUBE_START = (-0.26, 0.0)
 # TraceShapeSeq: SEQUENCE_LEN_RANGE; variant -> trace_shape_guess_rate(SHAPE_SET, lengths=...,
 # shapes_shown=True) (100,000 samples, seed 0).
 TRACE_SHAPE_SEQ_LENGTHS = (2, 5)
-# Both trace families: where the green cube starts (GREEN_CUBE_POSITION), the guessed route's start.
-TRACE_SHAPE_CUBE_START = (-0.26, 0.0)
 TRACE_SHAPE_SEQ_GUESS_RATES: dict[str, float] = {"Easy": 0.0190, "Medium": 0.0070, "Hard": 0.0059}
 
 
@@ -170,8 +170,8 @@ def trace_shape_guess_rate(
     rng = np.random.default_rng(seed)
     elements = lengths[1]
 
-    def draw_checkpoints(n: int, shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, elements, 12, 2) checkpoints about one drawn centre per sample, and the centres."""
+    def draw_checkpoints(n: int, shapes: np.ndarray) -> np.ndarray:
+        """(n, elements, 12, 2) checkpoints about one drawn centre per sample."""
         centres = np.stack([rng.uniform(*env.CENTER_X_RANGE, n), rng.uniform(*env.CENTER_Y_RANGE, n)], -1)
         sizes = rng.uniform(*env.SIZE_RANGE, (n, elements))
         rotations = rng.uniform(0.0, 2 * math.pi, (n, elements))
@@ -181,7 +181,7 @@ def trace_shape_guess_rate(
             torch.as_tensor(sizes, dtype=torch.float32),
             torch.as_tensor(rotations, dtype=torch.float32),
         )
-        return checkpoints_of(waypoints).double().numpy(), centres
+        return checkpoints_of(waypoints).double().numpy()
 
     passed = 0
     for start in range(0, samples, 10_000):
@@ -189,10 +189,10 @@ def trace_shape_guess_rate(
         count = rng.integers(lengths[0], lengths[1] + 1, n)
         true_shapes = rng.choice(shape_set, (n, elements))
         guessed_shapes = true_shapes if shapes_shown else rng.choice(shape_set, (n, elements))
-        (truth, centres), (guess, _) = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
+        truth, guess = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
         # Per element the route: from where the cube is to the guessed start, then round the
         # guessed checkpoints and back; straight moves, 16 points each.
-        start = np.broadcast_to(np.asarray(cube_start, dtype=np.float64), centres.shape)
+        start = np.broadcast_to(np.asarray(cube_start, dtype=np.float64), (n, 2))
         previous = np.concatenate([start[:, None], guess[:, :-1, 0]], axis=1)
         route = np.concatenate([previous[:, :, None], guess, guess[:, :, :1]], axis=2)
         steps = np.linspace(0.0, 1.0, 16, endpoint=False)[:, None]

@@ -145,8 +145,8 @@ LEAKS: tuple[Leak, ...] = (
         "the frame at the start of the action phase, before the cube is picked up, showed the "
         "centre as the lamp had",
         evidence="a probe (benchmarks/leak_probes/trace_shape_cube_centre.py): the memoryless "
-        "oracle with the centre read off the cube (guessed "
-        "sizes and rotations; Seq: the cue's shapes), seeds 4242424242+0..9, state obs: "
+        "oracle with the centre read off the cube (guessed sizes and rotations; Seq: the cue's "
+        "shapes), seeds 4242424242+0..9, state obs: "
         "TraceShape Easy/Medium/Hard 10, 4, 4 of 10; TraceShapeSeq 7, 3, 5 of 10. After the "
         "fix the same probe: TraceShapeEasy 1/10, TraceShapeSeqEasy 0/10; over 50 canonical "
         "seeds the memoryless oracle (centre guessed from its range) 5, 1, 1 and 3, 0, 0 of 50, "

@@ -41,13 +41,6 @@ class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
     )
     DENSE_REWARD_MAX = 30.0
     MAX_ELEMENTS = 1
-    # Centre + (0.25, 0) would show the centre (a circle of middle size about it passes every
-    # checkpoint in 90 % of Easy episodes without memory). x = 0.2 keeps the lamp's base
-    # (±0.022) clear of the largest contour (x ≤ 0.134) and the cube on it, as the offset did.
-    LAMP_POSITION = (0.2, 0.0)
-    # Centre + (−0.16, 0) would show the centre too, until the cube is picked up (the
-    # memoryless oracle with the centre read off the cube: Easy 10/10, Medium and Hard 4/10).
-    GREEN_CUBE_POSITION = (-0.26, 0.0)
     CUE_PHASE_STEPS = (3 + NUM_WAYPOINTS, 8 + NUM_WAYPOINTS)
 
     # ------------------------------------------------- per-element views (E = 1)

@@ -62,12 +62,10 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
     BUTTON_BASE_RGBA: ClassVar[tuple[int, int, int, int]] = (55, 64, 78, 255)
     BUTTON_CAP_RGBA: ClassVar[tuple[int, int, int, int]] = (210, 80, 80, 255)
     BUTTON_OFFSET_FROM_LAMP: ClassVar[tuple[float, float]] = (0.02, 0.16)
-    # Fixed spots instead of the reference's centre-relative ones (None: lamp + the offset).
+    # A fixed spot instead of the reference's lamp + BUTTON_OFFSET_FROM_LAMP (None: the offset).
     # The button sits beside the contours' region (y <= 0.284), its base more than a cube's
     # width clear of them and its 6.5 cm press radius clear of a TCP over any contour, in
     # view, 0.68 m from the robot's base (within a top-down press's reach of ~0.8 m).
-    LAMP_POSITION = (0.2, 0.0)
-    GREEN_CUBE_POSITION = (-0.26, 0.0)  # centre + (−0.16, 0) showed it until the cube was picked up
     BUTTON_POSITION: ClassVar[tuple[float, float] | None] = (-0.05, 0.38)
     BUTTON_PRESS_RADIUS: ClassVar[float] = 0.065
     # Where the reward's button-reach term aims the TCP: (button XY, this height).
@@ -151,12 +149,8 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
 
     def _place_fixtures(self, env_idx: torch.Tensor, centre: torch.Tensor) -> None:
         super()._place_fixtures(env_idx, centre)
-        if self.BUTTON_POSITION is None:
-            offset = torch.tensor(self.BUTTON_OFFSET_FROM_LAMP, device=self.device)
-            self.button.place(env_idx, self.lamp.position[env_idx, :2] + offset)
-        else:
-            xy = torch.tensor(self.BUTTON_POSITION, device=self.device).expand(len(env_idx), 2)
-            self.button.place(env_idx, xy)
+        lamp_xy = self.lamp.position[env_idx, :2]
+        self.button.place(env_idx, self._fixture_xy(self.BUTTON_POSITION, self.BUTTON_OFFSET_FROM_LAMP, lamp_xy))
 
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         super()._on_episode_start(env_idx)

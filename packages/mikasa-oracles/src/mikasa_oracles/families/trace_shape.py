@@ -215,8 +215,8 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
     observation), a size drawn from ``SIZE_RANGE``, a rotation from [0, 2π) and a centre
     drawn from ``CENTER_X_RANGE`` × ``CENTER_Y_RANGE`` (the lamp and the green cube stand at
     fixed spots; an env whose lamp follows the centre, ``LAMP_POSITION`` None, shows it:
-    centre = lamp − ``LAMP_OFFSET``). All fixed per episode; it goes round each contour ``PASSES`` times,
-    blind. The tasks' chance (``mikasa_bench.chance``) is the rate at which such a guess
+    centre = lamp − ``LAMP_OFFSET``). All fixed per episode; it goes round each contour
+    ``PASSES`` times, blind. The tasks' chance (``mikasa_bench.chance``) is the rate at which such a guess
     passes every checkpoint. Kept: the script's progress.
     """
 
