@@ -8,10 +8,11 @@ one at a time per actor, preferring the task the actor already has an env for (t
 executor's `_Scheduler`), and the runner puts results back in seed order, so the numbers
 are the ones the local executor gives.
 
-Placement: actors ask for one CPU each and use Ray's ``SPREAD`` strategy, so they are
-distributed over the cluster's nodes rather than packed onto the head node. Actors that
-render on the GPU (``--render-device gpu``, or the first N of a mixed pool) also ask for a
-share of the cluster's GPUs, so Ray places them on GPU nodes and gives each one a
+Placement (`mikasa_envs.ray_actors`, shared with mikasa-oracles' collector): actors ask
+for one CPU each and use Ray's ``SPREAD`` strategy, so they are distributed over the
+cluster's nodes rather than packed onto the head node. Actors that render on the GPU
+(``--render-device gpu``, or the first N of a mixed pool) also ask for an equal share of the
+cluster's GPUs, so Ray places them on GPU nodes and gives each one a
 ``CUDA_VISIBLE_DEVICES``, spreading the rendering over every GPU of a node.
 
 Requirements on a cluster: every node has the same packages installed (``mikasa-bench``
@@ -27,6 +28,14 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
+from mikasa_envs.ray_actors import (
+    RayStartError,
+    actor_options,
+    equal_gpu_share,
+    init_ray,
+    wait_until_ready,
+)
+
 from .errors import BenchError
 from .executor import (
     EpisodeJob,
@@ -39,11 +48,6 @@ from .executor import (
 from .render import apply_environment, worker_environment
 
 __all__ = ["RayExecutor", "import_ray"]
-
-READY_TIMEOUT_S = 600.0
-"""How long to wait for the actors to start (imports + scheduling) before giving up, e.g.
-when the cluster cannot satisfy their resource requests."""
-
 
 def import_ray() -> Any:
     """``import ray`` with an installation hint."""
@@ -118,21 +122,6 @@ class RayExecutor(Executor):
         out["address"] = self.address or os.environ.get("RAY_ADDRESS") or "local"
         return out
 
-    def _init(self, ray: Any) -> bool:
-        """Connect to / start Ray unless already initialised; True if we started it."""
-        if ray.is_initialized():
-            return False
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-        kwargs.update(self.init_kwargs)
-        address = self.address or os.environ.get("RAY_ADDRESS")
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
-            if self.workers is not None:
-                kwargs.setdefault("num_cpus", self.workers)
-            ray.init(**kwargs)
-        return True
-
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[EpisodeOutcome]:
         """Start the actors, feed them, yield outcomes; always removes the actors (and
         shuts Ray down if this executor started it)."""
@@ -142,7 +131,7 @@ class RayExecutor(Executor):
         ray = import_ray()
         config = render_config(jobs)
         t_start = time.perf_counter()
-        started = self._init(ray)
+        started = init_ray(ray, self.address, self.workers, self.init_kwargs)
         actors: list[Any] = []
         try:
             resources = ray.cluster_resources()
@@ -158,17 +147,10 @@ class RayExecutor(Executor):
                         f"{n_gpu} worker(s) should render on the GPU (render device "
                         f"{config.render_description()}), but the Ray cluster has no GPUs"
                     )
-                # Equal shares (Ray accepts 4 decimals; a share above 1 must be whole).
-                gpu_share = min(1.0, int(total_gpus / n_gpu * 10_000) / 10_000)
+                gpu_share = equal_gpu_share(total_gpus, n_gpu)
             actor_cls = ray.remote(_RayWorker)
             for wid, device in enumerate(devices):
-                options: dict[str, Any] = {
-                    "num_cpus": 1,
-                    "scheduling_strategy": "SPREAD",
-                    "max_restarts": 0,
-                }
-                if device == "gpu":
-                    options["num_gpus"] = gpu_share
+                options = actor_options(gpu_share if device == "gpu" else 0.0)
                 # One CPU per actor: lavapipe rasterises in the actor's own thread.
                 env_vars = worker_environment(device, lp_threads=0)
                 actors.append(actor_cls.options(**options).remote(wid, env_vars))
@@ -185,16 +167,10 @@ class RayExecutor(Executor):
                 ray.shutdown()
 
     def _wait_ready(self, ray: Any, actors: Sequence[Any]) -> None:
-        refs = [a.ready.remote() for a in actors]
         try:
-            hosts = ray.get(refs, timeout=READY_TIMEOUT_S)
-        except ray.exceptions.GetTimeoutError:
-            raise BenchError(
-                f"Ray could not start {len(actors)} worker(s) within {READY_TIMEOUT_S:.0f} s; "
-                f"cluster resources: {ray.cluster_resources()} (lower --workers?)"
-            ) from None
-        except ray.exceptions.RayActorError as exc:
-            raise BenchError(f"a Ray worker failed to start:\n{exc}") from None
+            hosts = wait_until_ready(ray, actors)
+        except RayStartError as exc:
+            raise BenchError(str(exc)) from None
         self.nodes = {}
         for h in hosts:
             self.nodes[h] = self.nodes.get(h, 0) + 1

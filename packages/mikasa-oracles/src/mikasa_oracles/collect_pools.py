@@ -32,10 +32,6 @@ from typing import Any
 
 __all__ = ["CollectError", "CollectionFailed", "InlinePool", "ProcessPool", "RayPool"]
 
-RAY_READY_TIMEOUT_S = 600.0
-"""How long the Ray actors may take to start (imports, scheduling) before giving up."""
-
-
 class CollectError(ValueError):
     """Bad input (unknown task, no oracle, bad counts, inconsistent existing data): exit 2."""
 
@@ -226,34 +222,28 @@ class RayPool:
         *,
         address: str | None = None,
     ) -> None:
+        # Imported lazily: mikasa_envs loads ManiSkill.
+        from mikasa_envs.ray_actors import (
+            RayStartError,
+            actor_options,
+            equal_gpu_share,
+            init_ray,
+            wait_until_ready,
+        )
+
         ray = self.ray = import_ray()
         self.staging = Path(runner_args[1])
-        self.started = False
-        if not ray.is_initialized():
-            address = address or os.environ.get("RAY_ADDRESS")
-            options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-            if address:
-                ray.init(address=address, **options)
-            else:
-                ray.init(num_cpus=workers, **options)
-            self.started = True
+        self.started = init_ray(ray, address, workers)
         gpus = float(ray.cluster_resources().get("GPU", 0.0))
-        options = {"num_cpus": 1, "scheduling_strategy": "SPREAD", "max_restarts": 0}
-        if gpus > 0:  # render on the cluster's GPUs: equal shares (Ray takes 4 decimals)
-            options["num_gpus"] = min(1.0, int(gpus / workers * 10_000) / 10_000)
+        # Render on the cluster's GPUs where it has any.
+        options = actor_options(equal_gpu_share(gpus, workers) if gpus > 0 else 0.0)
         actor_cls = ray.remote(_RayAttemptWorker)
         self.actors = [actor_cls.options(**options).remote(runner_args, factory) for _ in range(workers)]
         try:
-            ray.get([a.ready.remote() for a in self.actors], timeout=RAY_READY_TIMEOUT_S)
-        except ray.exceptions.GetTimeoutError:
+            wait_until_ready(ray, self.actors)
+        except RayStartError as exc:
             self.close()
-            raise CollectionFailed(
-                f"Ray could not start {workers} worker(s) within {RAY_READY_TIMEOUT_S:.0f} s; "
-                f"cluster resources: {ray.cluster_resources()} (lower --workers?)"
-            ) from None
-        except ray.exceptions.RayError as exc:
-            self.close()
-            raise CollectionFailed(f"a Ray worker failed to start:\n{exc}") from None
+            raise CollectionFailed(str(exc)) from None
         self.idle = list(self.actors)
         self.waiting: list[int] = []
         self.running: dict[Any, tuple[Any, int]] = {}
