@@ -72,8 +72,11 @@ def main() -> None:
         ax.grid(alpha=0.3)
         if tag.endswith("success_once"):
             ax.set_ylim(-0.02, 1.02)
-    axes[0].legend()
-    fig.tight_layout()
+    # Below the plots: inside, a legend of long run labels hides the curves.
+    handles, names = axes[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="lower center", ncol=min(2, len(names)), fontsize="small")
+    rows = -(-len(names) // 2)
+    fig.tight_layout(rect=(0, 0.07 * rows, 1, 1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out.with_suffix(".png"), dpi=100)
