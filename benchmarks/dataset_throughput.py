@@ -22,6 +22,13 @@ Short runs are start-up bound (with 2 workers, each worker process imports the s
 and builds its env, ~8 s; with lavapipe the first build compiles shaders): the rate
 "after start-up" (from the first finished attempt on) is printed beside the overall one,
 and 2 workers only pay off overall over longer runs (``--collect-episodes 40``).
+
+``--project [EPISODES]`` adds the whole plan projected from those rates: EPISODES (default
+250, the published count) successful episodes of each of the 90 canonical tasks, its frames,
+hours with the largest worker count measured, and NPZ disk. On a 16-core machine::
+
+    python benchmarks/dataset_throughput.py --paths collect --collect-episodes 32 \
+        --collect-workers 16 --project --sim-python "$(command -v python)" --json collect.json
 """
 
 from __future__ import annotations
@@ -105,22 +112,27 @@ def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
     print("COLLECT " + json.dumps(row), flush=True)
 
 
-def family_representatives(sim_python: Path) -> tuple[dict[str, str], list[str]]:
-    """(family -> its shortest-horizon registered canonical task, families without envs),
-    read from the manifest in the simulator's environment."""
+def manifest_rows(sim_python: Path) -> list[tuple[str, int, str, bool, bool]]:
+    """(family, horizon, env id, registered, canonical) of every manifest task, read in the
+    simulator's environment."""
     code = (
         "import json, mikasa_envs\n"
         "from mikasa_envs.manifest import list_tasks\n"
         "reg = set(mikasa_envs.registered_env_ids())\n"
-        "rows = [(t.family, t.max_episode_steps, t.env_id, t.env_id in reg) for t in list_tasks()]\n"
+        "rows = [(t.family, t.max_episode_steps, t.env_id, t.env_id in reg, t.canonical)\n"
+        "        for t in list_tasks()]\n"
         "print('FAMILIES ' + json.dumps(rows))\n"
     )
     out = subprocess.run(
         [str(sim_python), "-c", code], capture_output=True, text=True, check=True
     ).stdout
-    rows = json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
+    return json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
+
+
+def family_representatives(rows: list) -> tuple[dict[str, str], list[str]]:
+    """(family -> its shortest-horizon registered canonical task, families without envs)."""
     chosen: dict[str, tuple[int, str]] = {}
-    for family, horizon, env_id, registered in rows:
+    for family, horizon, env_id, registered, _canonical in rows:
         if registered and (family not in chosen or horizon < chosen[family][0]):
             chosen[family] = (horizon, env_id)
     missing = sorted({family for family, *_ in rows} - set(chosen))
@@ -137,7 +149,8 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
     if not sim_python.is_file():
         print(f"collection: skipped, no simulator environment at {sim_python} (scripts/setup.sh)")
         return []
-    reps, missing = family_representatives(sim_python)
+    tasks = manifest_rows(sim_python)
+    reps, missing = family_representatives(tasks)
     if only:
         reps = {f: e for f, e in reps.items() if f in only}
     print(f"collection: {episodes} episodes per run; families without envs yet: {len(missing)}")
@@ -162,6 +175,8 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
             if proc.returncode != 0 or not lines:
                 raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
             row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
+            row["horizon"] = next(h for f, h, e, *_ in tasks if e == env_id)
+            row["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
             print(
                 f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min, "
                 f"{row['steady_episodes_per_min']:>6.1f} after start-up ({row['episodes']} ep, {row['frames']} frames, "
@@ -172,7 +187,56 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
             shutil.rmtree(out, ignore_errors=True)
     for family in missing:
         print(f"collect {family:<30} (no env yet)")
+    if args.project and rows:
+        rows.append(project_plan(rows, tasks, args.project))
     return rows
+
+
+def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
+    """The whole published plan (``episodes_per_task`` successful episodes of every canonical
+    task) projected from the measured families, with the largest worker count measured.
+
+    Per task: frames = episodes x the representative's frames per episode x (the task's
+    horizon / the representative's): the variants of a family differ mostly in phase lengths,
+    which scale with the horizon (an estimate; the Long variants' episodes are longer). Time
+    from the representative's rate after start-up (failed attempts included), disk from its
+    bytes per frame."""
+    most = max(r["workers"] for r in rows)
+    measured = {r["family"]: r for r in rows if r.get("workers") == most and r["episodes"]}
+    frames = seconds = size = 0.0
+    covered, uncovered = 0, {}
+    for family, horizon, env_id, _registered, canonical in tasks:
+        if not canonical:
+            continue
+        rep = measured.get(family)
+        if rep is None:
+            uncovered.setdefault(family, []).append(env_id)
+            continue
+        per_episode = rep["frames"] / rep["episodes"] * horizon / rep["horizon"]
+        task_frames = episodes_per_task * per_episode
+        frames_per_s = rep["steady_episodes_per_min"] / 60 * rep["frames"] / rep["episodes"]
+        frames += task_frames
+        seconds += task_frames / frames_per_s
+        size += task_frames * rep["bytes"] / rep["frames"]
+        covered += 1
+    plan = {
+        "path": "plan",
+        "workers": most,
+        "episodes_per_task": episodes_per_task,
+        "tasks": covered,
+        "tasks_not_measured": uncovered,
+        "frames": int(frames),
+        "hours": round(seconds / 3600, 2),
+        "disk_gb": round(size / 1e9, 1),
+    }
+    print(
+        f"plan: {covered} canonical tasks x {episodes_per_task} episodes ~ {plan['frames'] / 1e6:.2f} M frames, "
+        f"~{plan['hours']:.1f} h with {most} worker(s), ~{plan['disk_gb']:.1f} GB of NPZ"
+        + (f"; not counted: {sum(map(len, uncovered.values()))} tasks of the {len(uncovered)} "
+           "families not measured" if uncovered else ""),
+        flush=True,
+    )
+    return plan
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -204,6 +268,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--collect-workers", default="1,2", help="worker counts to collect with")
     parser.add_argument(
         "--collect-families", help="comma-separated families (default: all with envs)"
+    )
+    parser.add_argument(
+        "--project",
+        type=int,
+        nargs="?",
+        const=250,
+        metavar="EPISODES",
+        help="with collect: project the whole plan, EPISODES (default 250, the published "
+        "count) per canonical task, from the measured families",
     )
     parser.add_argument(
         "--sim-python",
