@@ -156,4 +156,22 @@ LEAKS: tuple[Leak, ...] = (
         "starts on average; draws and scoring unchanged",
         reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #27",
     ),
+    Leak(
+        tasks="TraceShapeSeq{Easy,Medium,Hard}, TraceShapeHard",
+        leak="the checkpoint latches accumulate over the whole action phase and nothing "
+        "penalises straying from the contour: sweeping the carried cube back and forth over "
+        "the whole region where contours can lie visits every checkpoint of every element in "
+        "turn, without ever seeing the demonstration (TraceShapeSeq's action phase is 1,170+ "
+        "steps)",
+        evidence="a probe (benchmarks/leak_probes/trace_shape_raster.py): grasp the cube, "
+        "sweep lanes 6 cm apart over x -0.28..0.08, y -0.23..0.23 until 90 steps before the "
+        "horizon, press the button; seeds 4242424242+0..9, state obs: TraceShapeSeq "
+        "Easy/Medium/Hard 6, 5, 5 of 10 (chance 1.9/0.7/0.6 %); TraceShape Easy/Medium/Hard "
+        "0, 0, 2 of 10 (250-350 steps leave one or two sweeps)",
+        status="open",
+        fix="proposed: once an element has a latched checkpoint, a cube farther than a few cm "
+        "from its contour clears the element's latches (a traced contour stays within the "
+        "3.5 cm latch radius; a sweep leaves it within a lane), with the guess-rate chance "
+        "recomputed under the same rule",
+    ),
 )
