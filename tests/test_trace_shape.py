@@ -167,6 +167,39 @@ def test_contour_scoring_success_and_failures(make_env):
     assert not _flag(info["success"]) and _flag(info["all_visited"])
 
 
+def test_a_trace_starts_at_checkpoint_0_and_straying_clears_it(make_env):
+    """DEVIATIONS.md Fixed #28: latches only from checkpoint 0 on, cleared by a cube farther
+    than STRAY_RADIUS from the contour (a blind sweep of the region passed TraceShapeSeq)."""
+    env = make_env("TraceShapeEasy-VLA-v0", reward_mode="normalized_dense")
+    base = env.unwrapped
+    env.reset(seed=5)
+    checkpoints = base.checkpoints[0].clone()
+    _step_to_action_phase(env)
+    # Before the start, only checkpoint 0 can latch (and the reward aims there).
+    for k in range(1, 6):
+        _place_cube(base, checkpoints[k])
+        *_, info = env.step(ZERO)
+    assert float(info["visit_fraction"][0]) == 0.0
+    assert int(base._progress["nearest_unvisited_index"][0]) == 0
+    for k in range(6):
+        _place_cube(base, checkpoints[k])
+        *_, info = env.step(ZERO)
+    assert float(info["visit_fraction"][0]) == pytest.approx(6 / 12)
+    # Within STRAY_RADIUS of the contour the latches stay; at its centre (R >= 7.8 cm away) they go.
+    near = checkpoints[5] + 0.9 * base.STRAY_RADIUS * torch.nn.functional.normalize(checkpoints[5] - base.shape_centre[0], dim=0)
+    _place_cube(base, near)
+    *_, info = env.step(ZERO)
+    assert float(info["visit_fraction"][0]) == pytest.approx(6 / 12)
+    _place_cube(base, base.shape_centre[0])
+    *_, info = env.step(ZERO)
+    assert float(info["visit_fraction"][0]) == 0.0
+    # A whole trace from the start closes it.
+    for k in [*range(NUM_CHECKPOINTS), 0]:
+        _place_cube(base, checkpoints[k])
+        *_, terminated, _, info = env.step(ZERO)
+    assert _flag(info["success"]) and _flag(terminated)
+
+
 def test_reward_in_unit_interval_and_idempotent_evaluate(make_env):
     env = make_env("TraceShapeEasy-VLA-v0", reward_mode="normalized_dense")
     base = env.unwrapped
@@ -175,11 +208,11 @@ def test_reward_in_unit_interval_and_idempotent_evaluate(make_env):
     for _ in range(int(base.cue_steps_per_env[0]) + 5):
         _, reward, *_ = env.step(rng.uniform(-1, 1, 7).astype(np.float32))
         assert 0.0 <= float(reward[0]) <= 1.0
-    _place_cube(base, base.checkpoints[0, 3])
+    _place_cube(base, base.checkpoints[0, 0])
     *_, info = env.step(ZERO)
     assert int(info["checkpoint_visited"].sum()) == 1
     # A second evaluate() of the same step changes nothing.
-    _place_cube(base, base.checkpoints[0, 7])
+    _place_cube(base, base.checkpoints[0, 1])
     assert int(base.evaluate()["checkpoint_visited"].sum()) == 1
     dense = base.compute_dense_reward(None, torch.zeros(1, 7), info)
     assert 0.0 < float(dense[0]) < base.DENSE_REWARD_MAX

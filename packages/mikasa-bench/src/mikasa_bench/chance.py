@@ -160,8 +160,11 @@ def trace_shape_guess_rate(
     per element a size, a rotation and (unless shown) a shape, drawn as the env draws them —
     traced as a policy would (a straight move from where the cube is — ``cube_start``, then
     the previous contour's start — to the guessed start, then along the guessed checkpoints
-    and back), pass within the checkpoint radius of every true checkpoint of every element
-    (which also closes each true contour). Imports the env module for its geometry."""
+    and back), close every true contour under the env's latch rules: the true checkpoint 0
+    latches first (within the checkpoint radius), then the others, and the route must not
+    stray farther than ``STRAY_RADIUS`` from the true contour until it comes back to
+    checkpoint 0 with all latched (straying clears the element). Imports the env module for
+    its geometry."""
     import numpy as np
     import torch
     from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
@@ -170,8 +173,9 @@ def trace_shape_guess_rate(
     rng = np.random.default_rng(seed)
     elements = lengths[1]
 
-    def draw_checkpoints(n: int, shapes: np.ndarray) -> np.ndarray:
-        """(n, elements, 12, 2) checkpoints about one drawn centre per sample."""
+    def draw_contours(n: int, shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, elements, 64, 2) waypoints and (n, elements, 12, 2) checkpoints about one
+        drawn centre per sample."""
         centres = np.stack([rng.uniform(*env.CENTER_X_RANGE, n), rng.uniform(*env.CENTER_Y_RANGE, n)], -1)
         sizes = rng.uniform(*env.SIZE_RANGE, (n, elements))
         rotations = rng.uniform(0.0, 2 * math.pi, (n, elements))
@@ -181,7 +185,7 @@ def trace_shape_guess_rate(
             torch.as_tensor(sizes, dtype=torch.float32),
             torch.as_tensor(rotations, dtype=torch.float32),
         )
-        return checkpoints_of(waypoints).double().numpy()
+        return waypoints.double().numpy(), checkpoints_of(waypoints).double().numpy()
 
     passed = 0
     for start in range(0, samples, 10_000):
@@ -189,7 +193,7 @@ def trace_shape_guess_rate(
         count = rng.integers(lengths[0], lengths[1] + 1, n)
         true_shapes = rng.choice(shape_set, (n, elements))
         guessed_shapes = true_shapes if shapes_shown else rng.choice(shape_set, (n, elements))
-        truth, guess = draw_checkpoints(n, true_shapes), draw_checkpoints(n, guessed_shapes)
+        (contour, truth), (_, guess) = draw_contours(n, true_shapes), draw_contours(n, guessed_shapes)
         # Per element the route: from where the cube is to the guessed start, then round the
         # guessed checkpoints and back; straight moves, 16 points each.
         start = np.broadcast_to(np.asarray(cube_start, dtype=np.float64), (n, 2))
@@ -197,8 +201,13 @@ def trace_shape_guess_rate(
         route = np.concatenate([previous[:, :, None], guess, guess[:, :, :1]], axis=2)
         steps = np.linspace(0.0, 1.0, 16, endpoint=False)[:, None]
         trace = (route[:, :, :-1, None] + np.diff(route, axis=2)[:, :, :, None] * steps).reshape(n, elements, -1, 2)
-        distance = np.linalg.norm(truth[:, :, :, None] - trace[:, :, None], axis=-1).min(axis=-1)
-        element_ok = (distance < env.CHECKPOINT_RADIUS).all(axis=-1)
+        visited = np.zeros(truth.shape[:3], dtype=bool)
+        element_ok = np.zeros((n, elements), dtype=bool)
+        for point in np.moveaxis(trace, 2, 0):  # (n, elements, 2), in the route's order
+            visited &= ~(np.linalg.norm(contour - point[:, :, None], axis=-1).min(axis=-1) > env.STRAY_RADIUS)[..., None]
+            near = np.linalg.norm(truth - point[:, :, None], axis=-1) < env.CHECKPOINT_RADIUS
+            visited |= near & (visited[..., :1] | near[..., :1])
+            element_ok |= visited.all(axis=-1) & near[..., 0]
         in_sequence = np.arange(elements) < count[:, None]
         passed += int((element_ok | ~in_sequence).all(axis=-1).sum())
     return passed / samples

@@ -128,6 +128,12 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     # Pre-demo length P ~ uniform int [lo, hi]; the demo shows one waypoint per step.
     PRE_DEMO_STEPS: ClassVar[tuple[int, int]] = (3, 8)
     CHECKPOINT_RADIUS: ClassVar[float] = 0.035
+    # A trace starts at checkpoint 0 (the others latch only after it) and stays within this
+    # distance (XY) of the contour's waypoints until the element is closed; leaving it clears
+    # the element's latches. Without it the latches accumulated over the whole action phase,
+    # and a blind sweep of the region passed TraceShapeSeq (DEVIATIONS.md Fixed #28). The
+    # oracle's traces stay within 0.03.
+    STRAY_RADIUS: ClassVar[float] = 0.06
     EMPTY_PHASE_STEPS = (0, 0)
     RENDER_CAMERA_EYE = (0.6, 0.7, 0.6)
     RENDER_CAMERA_TARGET = (0.0, 0.0, 0.15)
@@ -292,18 +298,27 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         return self.green_cube.pose.p
 
     def _score_active_element(self, scoring: torch.Tensor, cube_xy: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Latch the active element's checkpoints within CHECKPOINT_RADIUS of the cube (in envs
-        ``scoring``) and return its visit state: visited flags, fraction, all-visited, start
-        distance, closure, nearest unvisited checkpoint (index, XY distance; inf if none)."""
+        """Advance the active element's latches (in envs ``scoring``): a cube farther than
+        STRAY_RADIUS from its contour clears them; checkpoint 0 latches within
+        CHECKPOINT_RADIUS of the cube, the others likewise once checkpoint 0 has. Returns its
+        visit state: visited flags, fraction, all-visited, start distance, closure, nearest
+        checkpoint that can latch next (index, XY distance; inf if none)."""
         checkpoints = self._element_checkpoints[self._rows, self._active_element]
         distances = torch.linalg.norm(checkpoints - cube_xy[:, None], dim=-1)
         visited = self._element_visited[self._rows, self._active_element]
         if bool(scoring.any()):
-            visited = visited | ((distances < self.CHECKPOINT_RADIUS) & scoring[:, None])
+            contour = self._element_waypoints[self._rows, self._active_element]
+            off_contour = torch.linalg.norm(contour - cube_xy[:, None], dim=-1).min(dim=-1).values > self.STRAY_RADIUS
+            visited = visited & ~(scoring & off_contour)[:, None]
+            near = (distances < self.CHECKPOINT_RADIUS) & scoring[:, None]
+            started = visited[:, :1] | near[:, :1]
+            visited = visited | (near & started)
             self._element_visited[self._rows, self._active_element] = visited
         all_visited = visited.all(dim=-1)
         start_dist = distances[:, 0]
-        nearest_unvisited = torch.where(visited, float("inf"), distances).min(dim=-1)
+        # Before the start only checkpoint 0 can latch.
+        can_latch = visited[:, :1] | (torch.arange(NUM_CHECKPOINTS, device=self.device) == 0)
+        nearest_unvisited = torch.where(visited | ~can_latch, float("inf"), distances).min(dim=-1)
         return dict(
             visited=visited,
             visit_fraction=visited.float().mean(dim=-1),
