@@ -166,12 +166,14 @@ LEAKS: tuple[Leak, ...] = (
         evidence="a probe (benchmarks/leak_probes/trace_shape_raster.py): grasp the cube, "
         "sweep lanes 6 cm apart over x -0.28..0.08, y -0.23..0.23 until 90 steps before the "
         "horizon, press the button; seeds 4242424242+0..9, state obs: TraceShapeSeq "
-        "Easy/Medium/Hard 6, 5, 5 of 10 (chance 1.9/0.7/0.6 %); TraceShape Easy/Medium/Hard "
-        "0, 0, 2 of 10 (250-350 steps leave one or two sweeps)",
-        status="open",
-        fix="proposed: once an element has a latched checkpoint, a cube farther than a few cm "
-        "from its contour clears the element's latches (a traced contour stays within the "
-        "3.5 cm latch radius; a sweep leaves it within a lane), with the guess-rate chance "
-        "recomputed under the same rule",
+        "Easy/Medium/Hard 6, 5, 5 of 10 (chance 2.4/0.8/0.6 %); TraceShape Easy/Medium/Hard "
+        "0, 0, 2 of 10 (chance 5.9/3.0/1.7 %; 250-350 steps leave one or two sweeps). After the "
+        "fix the same probe: 0 of 10 on all six; over 50 canonical seeds the oracle 300/300, the "
+        "memoryless oracle 5, 1, 1 and 3, 0, 0",
+        status="closed",
+        fix="a trace starts at checkpoint 0 (the others latch only after it) and stays within "
+        "6 cm of the contour until the element is closed; straying clears the element's latches "
+        "(the oracle's traces stay within 3 cm); the guess-rate chance follows the same rules",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #28",
     ),
 )

@@ -217,7 +217,7 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
     fixed spots; an env whose lamp follows the centre, ``LAMP_POSITION`` None, shows it:
     centre = lamp − ``LAMP_OFFSET``). All fixed per episode; it goes round each contour
     ``PASSES`` times, blind. The tasks' chance (``mikasa_bench.chance``) is the rate at which such a guess
-    passes every checkpoint. Kept: the script's progress.
+    closes the true contours under the env's latch rules. Kept: the script's progress.
     """
 
     PASSES = 2
