@@ -286,7 +286,7 @@ def task_chance(env_id: str) -> Chance:
         return Chance(
             TRACE_SHAPE_GUESS_RATES[variant],
             f"no discrete answer; a contour guessed from the prior ({len(TRACE_SHAPE_SETS[variant])} "
-            "shape(s), centre, size, rotation), traced from its start, closes the true one (all 12 "
+            "shape(s), centre, size, rotation), traced twice from its start, closes the true one (all 12 "
             "checkpoints within 3.5 cm, never 6 cm off it) at this rate",
         )
     if family == "trace_shape_seq":
@@ -295,7 +295,8 @@ def task_chance(env_id: str) -> Chance:
         return Chance(
             TRACE_SHAPE_SEQ_GUESS_RATES[variant],
             f"no discrete answer; {lo}-{hi} contours about one centre, their shapes shown in "
-            "task_cue: contours guessed from the prior (centre, sizes, rotations) close all of "
+            "task_cue: contours guessed from the prior (centre, sizes, rotations), each traced twice "
+            "in turn, close all of "
             "them (every checkpoint within 3.5 cm, never 6 cm off) at this rate",
         )
     raise ValueError(f"no chance rate for {env_id!r} (family {family!r})")
