@@ -129,14 +129,15 @@ def manifest_rows(sim_python: Path) -> list[tuple[str, int, str, bool, bool]]:
     return json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
 
 
-def family_representatives(rows: list) -> tuple[dict[str, str], list[str]]:
-    """(family -> its shortest-horizon registered canonical task, families without envs)."""
+def family_representatives(rows: list) -> tuple[dict[str, tuple[int, str]], list[str]]:
+    """(family -> (horizon, env id) of its shortest-horizon registered task, families
+    without envs)."""
     chosen: dict[str, tuple[int, str]] = {}
     for family, horizon, env_id, registered, _canonical in rows:
         if registered and (family not in chosen or horizon < chosen[family][0]):
             chosen[family] = (horizon, env_id)
     missing = sorted({family for family, *_ in rows} - set(chosen))
-    return {f: e for f, (_, e) in sorted(chosen.items())}, missing
+    return dict(sorted(chosen.items())), missing
 
 
 def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
@@ -155,7 +156,7 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
         reps = {f: e for f, e in reps.items() if f in only}
     print(f"collection: {episodes} episodes per run; families without envs yet: {len(missing)}")
     rows = []
-    for family, env_id in reps.items():
+    for family, (horizon, env_id) in reps.items():
         for w in workers:
             out = work / f"collect_{family}_{w}"
             proc = subprocess.run(
@@ -175,7 +176,7 @@ def collection_rows(args: argparse.Namespace, work: Path) -> list[dict]:
             if proc.returncode != 0 or not lines:
                 raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
             row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
-            row["horizon"] = next(h for f, h, e, *_ in tasks if e == env_id)
+            row["horizon"] = horizon
             row["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
             print(
                 f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min, "

@@ -21,15 +21,7 @@ from typing import Any
 
 import numpy as np
 from mikasa_envs.manifest import get_task
-from mikasa_envs.tasks._trace_shape import BULB_GREEN
-from mikasa_oracles.families.trace_shape import (
-    GRIPPER_CLOSED,
-    GRIPPER_OPEN,
-    HOVER_Z,
-    MAX_REGRASPS,
-    TRACE_Z,
-    MemorylessTraceShapeOracle,
-)
+from mikasa_oracles.families.trace_shape import MemorylessTraceShapeOracle
 
 # Every contour point lies within the centre range grown by the largest size (0.13 m).
 X_RANGE, Y_RANGE = (-0.28, 0.08), (-0.23, 0.23)
@@ -56,9 +48,7 @@ class RasterSweep(MemorylessTraceShapeOracle):
     horizon (back and forth over the raster), then drop the cube and press the button."""
 
     def _run(self) -> Iterator[np.ndarray]:
-        while self._lit_bulb() != BULB_GREEN:
-            cube = self._cube()
-            yield self._action(np.array([cube[0], cube[1], HOVER_Z]), GRIPPER_OPEN)
+        yield from self._watch_demonstration()
         yield from self._grasp()
         path, regrasps = raster_path(), 0
         horizon = get_task(self.base.spec.id).max_episode_steps
@@ -66,23 +56,10 @@ class RasterSweep(MemorylessTraceShapeOracle):
             for target in path:
                 if int(self.base.elapsed_steps[0]) >= horizon - SUBMIT_STEPS:
                     break
-                if self._grasp_lost() and regrasps < MAX_REGRASPS:
-                    regrasps += 1
-                    yield from self._stay(GRIPPER_OPEN, 2)
-                    yield from self._grasp()
-                yield from self._carry_near(target)
+                regrasps = yield from self._regrasp_if_lost(regrasps)
+                yield from self._carry_to(target, WAYPOINT_TOL, WAYPOINT_MAX_STEPS)
             path = path[::-1]
-        if hasattr(self.base, "button"):
-            yield from self._submit()
-        while True:
-            yield self._action(self._tcp_pose()[:3], GRIPPER_CLOSED)
-
-    def _carry_near(self, target_xy: np.ndarray) -> Iterator[np.ndarray]:
-        for _ in range(WAYPOINT_MAX_STEPS):
-            tcp, cube = self._tcp_pose(), self._cube()
-            if np.linalg.norm(target_xy - cube[:2]) < WAYPOINT_TOL:
-                return
-            yield self._action(np.array([*(target_xy + tcp[:2] - cube[:2]), TRACE_Z]), GRIPPER_CLOSED)
+        yield from self._finish()
 
 
 def make_policy(env: Any) -> RasterSweep:

@@ -171,7 +171,7 @@ def trace_shape_guess_rate(
     import numpy as np
     import torch
     from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
-    from mikasa_envs.tasks._trace_shape import checkpoints_of, shape_waypoints
+    from mikasa_envs.tasks._trace_shape import advance_latches, checkpoints_of, shape_waypoints
 
     rng = np.random.default_rng(seed)
     elements = lengths[1]
@@ -211,11 +211,10 @@ def trace_shape_guess_rate(
         visited = np.zeros((n, truth.shape[2]), dtype=bool)
         for point in np.moveaxis(trace, 1, 0):  # (n, 2), in the route's order
             element = np.minimum(active, elements - 1)
-            off = np.linalg.norm(contour[rows, element] - point[:, None], axis=-1).min(axis=-1) > env.STRAY_RADIUS
-            visited &= ~off[:, None]
-            near = np.linalg.norm(truth[rows, element] - point[:, None], axis=-1) < env.CHECKPOINT_RADIUS
-            visited |= near & (visited[:, :1] | near[:, :1])
-            closed = visited.all(axis=-1) & near[:, 0] & (active < count)
+            contour_dist = np.linalg.norm(contour[rows, element] - point[:, None], axis=-1).min(axis=-1)
+            checkpoint_dist = np.linalg.norm(truth[rows, element] - point[:, None], axis=-1)
+            visited = advance_latches(visited, checkpoint_dist, contour_dist, env.CHECKPOINT_RADIUS, env.STRAY_RADIUS)
+            closed = visited.all(axis=-1) & (checkpoint_dist[:, 0] < env.CHECKPOINT_RADIUS) & (active < count)
             active += closed
             visited[closed] = False
         passed += int((active >= count).sum())

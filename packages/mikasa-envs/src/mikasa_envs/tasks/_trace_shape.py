@@ -93,6 +93,18 @@ def checkpoints_of(waypoints: torch.Tensor) -> torch.Tensor:
     return waypoints[..., : CHECKPOINT_STRIDE * NUM_CHECKPOINTS : CHECKPOINT_STRIDE, :]
 
 
+def advance_latches(visited, checkpoint_dist, contour_dist, checkpoint_radius: float, stray_radius: float):
+    """One step of an element's checkpoint latches (DEVIATIONS.md Fixed #28): a cube farther
+    than ``stray_radius`` from the contour clears them; checkpoint 0 latches within
+    ``checkpoint_radius``, the others likewise once checkpoint 0 has. ``visited`` (..., 12)
+    bool, ``checkpoint_dist`` (..., 12) and ``contour_dist`` (...) the cube's distances.
+    Written with operators only, so torch tensors (the env) and numpy arrays (the guess-rate
+    Monte Carlo of ``mikasa_bench.chance``) go through the same rule."""
+    visited = visited & ~(contour_dist > stray_radius)[..., None]
+    near = checkpoint_dist < checkpoint_radius
+    return visited | (near & (visited[..., :1] | near[..., :1]))
+
+
 class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     """Scene, shape draws, demonstration timeline and checkpoint scoring of both trace families.
 
@@ -308,11 +320,9 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
         visited = self._element_visited[self._rows, self._active_element]
         if bool(scoring.any()):
             contour = self._element_waypoints[self._rows, self._active_element]
-            off_contour = torch.linalg.norm(contour - cube_xy[:, None], dim=-1).min(dim=-1).values > self.STRAY_RADIUS
-            visited = visited & ~(scoring & off_contour)[:, None]
-            near = (distances < self.CHECKPOINT_RADIUS) & scoring[:, None]
-            started = visited[:, :1] | near[:, :1]
-            visited = visited | (near & started)
+            contour_dist = torch.linalg.norm(contour - cube_xy[:, None], dim=-1).min(dim=-1).values
+            latched = advance_latches(visited, distances, contour_dist, self.CHECKPOINT_RADIUS, self.STRAY_RADIUS)
+            visited = torch.where(scoring[:, None], latched, visited)
             self._element_visited[self._rows, self._active_element] = visited
         all_visited = visited.all(dim=-1)
         start_dist = distances[:, 0]

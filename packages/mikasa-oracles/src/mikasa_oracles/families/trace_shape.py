@@ -129,17 +129,25 @@ class TraceShapeOracle(ScriptedOracle):
             yield self._action(here, gripper)
 
     def _run(self) -> Iterator[Action]:
-        # Demonstration: hover above the green cube, gripper open (recording runs in forward).
-        while self._lit_bulb() != BULB_GREEN:
-            cube = self._cube()
-            yield self._action(np.array([cube[0], cube[1], HOVER_Z]), GRIPPER_OPEN)
+        yield from self._watch_demonstration()
         yield from self._grasp()
         for element, checkpoints in enumerate(self.demonstrated_checkpoints()):
             yield from self._trace(element, checkpoints)
+        yield from self._finish()
+
+    def _finish(self) -> Iterator[Action]:
+        """TraceShapeSeq: submit; then hold still to the end."""
         if hasattr(self.base, "button"):
             yield from self._submit()
         while True:
             yield self._action(self._tcp_pose()[:3], GRIPPER_CLOSED)
+
+    def _watch_demonstration(self) -> Iterator[Action]:
+        """Hover above the green cube, gripper open, until the lamp turns green (the
+        recording runs in ``forward``)."""
+        while self._lit_bulb() != BULB_GREEN:
+            cube = self._cube()
+            yield self._action(np.array([cube[0], cube[1], HOVER_Z]), GRIPPER_OPEN)
 
     def _grasp(self) -> Iterator[Action]:
         """Open above the cube, descend to its centre, close."""
@@ -154,11 +162,22 @@ class TraceShapeOracle(ScriptedOracle):
     def _grasp_lost(self) -> bool:
         return bool(np.linalg.norm(self._cube() - self._tcp_pose()[:3]) > LOST_GRASP_DIST)
 
-    def _carry_to(self, target_xy: np.ndarray) -> Iterator[Action]:
-        """Move the TCP so that the carried cube's centre comes over ``target_xy``."""
-        for _ in range(TRACE_MAX_STEPS):
+    def _regrasp_if_lost(self, regrasps: int) -> Iterator[Action]:
+        """Re-grasp a dropped cube while fewer than MAX_REGRASPS were made; returns the new
+        count (``regrasps = yield from ...``)."""
+        if self._grasp_lost() and regrasps < MAX_REGRASPS:
+            yield from self._stay(GRIPPER_OPEN, 2)
+            yield from self._grasp()
+            return regrasps + 1
+        return regrasps
+
+    def _carry_to(
+        self, target_xy: np.ndarray, tol: float = TRACE_TOL, max_steps: int = TRACE_MAX_STEPS
+    ) -> Iterator[Action]:
+        """Move the TCP so that the carried cube's centre comes within ``tol`` of ``target_xy``."""
+        for _ in range(max_steps):
             tcp, cube = self._tcp_pose(), self._cube()
-            if np.linalg.norm(target_xy - cube[:2]) < TRACE_TOL:
+            if np.linalg.norm(target_xy - cube[:2]) < tol:
                 return
             goal = np.array([*(target_xy + tcp[:2] - cube[:2]), TRACE_Z])
             yield self._action(goal, GRIPPER_CLOSED)
@@ -170,10 +189,7 @@ class TraceShapeOracle(ScriptedOracle):
         regrasps = 0
         for _ in range(self.PASSES):
             for index in [*todo, 0]:
-                if self._grasp_lost() and regrasps < MAX_REGRASPS:
-                    regrasps += 1
-                    yield from self._stay(GRIPPER_OPEN, 2)
-                    yield from self._grasp()
+                regrasps = yield from self._regrasp_if_lost(regrasps)
                 yield from self._carry_to(checkpoints[index])
             if self._element_closed(element):
                 return
