@@ -637,6 +637,26 @@ def test_compare_exit_code(tmp_path, capsys):
     assert [d.verdict for d in comp.deltas] == ["worse", "n.s."]
 
 
+def test_reference_results_ship_and_compare(tmp_path, capsys):
+    """The shipped canonical result sets load by name, compare against a run, and are
+    never written into: a report of one needs --out."""
+    ref = load_run("reference:oracle")
+    assert ref.source == "reference:oracle" and ref.label == "oracle"
+    assert len(ref.results) == 90 and ref.protocol["canonical"] is True
+    assert ref.protocol["obs_mode"] == "rgb" and ref.summary["n_episodes_total"] == 4500
+    mine = _write_run(tmp_path / "mine", [_result(_task(), [False] * 50)])
+    assert cli.main(["compare", "reference:oracle", str(mine)]) == 1
+    assert "significantly worse than A on 1 task(s): RememberColor3-VLA-v0" in capsys.readouterr().out
+    assert cli.main(["compare", "reference:nope", str(mine)]) == 2
+    assert "accepted: reference:oracle" in capsys.readouterr().err
+    assert cli.main(["report", "reference:oracle"]) == 2
+    assert "give --out DIR" in capsys.readouterr().err
+    assert cli.main(["report", "reference:oracle", str(mine), "--out", str(tmp_path / "r")]) == 0
+    assert "| results | reference:oracle |" in (tmp_path / "r" / REPORT_MD).read_text()
+    assert cli.main(["validity", "reference:oracle", "--out", str(tmp_path / "v.md")]) == 0
+    assert "RememberColor3-VLA-v0" in (tmp_path / "v.md").read_text()
+
+
 def test_cli_usage_errors(tmp_path, capsys):
     assert cli.main(["run", "--split", "tiny", "--policy", "zero"]) == 2
     assert "unknown split 'tiny'" in capsys.readouterr().err

@@ -183,7 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_exec_args(qs, default_workers=QUICKSTART_WORKERS)
 
     rep = sub.add_parser("report", help="write report.md and report.html for result dirs")
-    rep.add_argument("dirs", nargs="+", metavar="DIR")
+    rep.add_argument(
+        "dirs", nargs="+", metavar="DIR", help="result dirs, or reference:oracle / reference:zero"
+    )
     rep.add_argument(
         "--out",
         default=None,
@@ -198,8 +200,10 @@ def build_parser() -> argparse.ArgumentParser:
         "compare",
         help="per-task deltas of B against A; exit 1 if B is significantly worse on any task",
     )
-    cmp_.add_argument("dir_a", metavar="DIR_A")
-    cmp_.add_argument("dir_b", metavar="DIR_B")
+    cmp_.add_argument(
+        "dir_a", metavar="DIR_A", help="baseline: a result dir, or a shipped reference:NAME"
+    )
+    cmp_.add_argument("dir_b", metavar="DIR_B", help="candidate: a result dir (or reference:NAME)")
     cmp_.add_argument("--alpha", type=float, default=0.05, help="significance level (0.05)")
 
     srv = sub.add_parser(
@@ -541,9 +545,12 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from .reference import is_reference
     from .report import text_table, write_report
     from .results import load_run
 
+    if not args.out and any(is_reference(d) for d in args.dirs):
+        raise BenchError("reference result sets are read-only: give --out DIR for the report")
     runs = [load_run(d) for d in args.dirs]
     labels = [r.label for r in runs]
     if len(set(labels)) != len(labels):

@@ -299,7 +299,7 @@ def _run_info(run: RunData) -> list[tuple[str, str]]:
     proto = s.get("protocol") or {}
     r0 = run.results[0]
     info = [
-        ("results", str(run.run_dir)),
+        ("results", run.source or str(run.run_dir)),
         ("policy", run.label),
         (
             "tasks",

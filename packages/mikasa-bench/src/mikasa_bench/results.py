@@ -536,6 +536,7 @@ class RunData:
     label: str
     results: list[dict[str, Any]]
     summary: dict[str, Any] | None
+    source: str = ""  # how the user named it, where that is not the path (reference:<name>)
 
     @property
     def protocol(self) -> dict[str, Any]:
@@ -547,12 +548,16 @@ class RunData:
 
 
 def load_run(run_dir: str | Path, label: str | None = None) -> RunData:
-    """Read a results directory (every ``*.json`` but ``summary.json`` is a task file).
+    """Read a results directory (every ``*.json`` but ``summary.json`` is a task file), or a
+    result set shipped with the package, named ``reference:<name>`` (`mikasa_bench.reference`).
 
     Raises `BenchError` if the directory is missing, unreadable, holds a malformed file, or
-    has no task results.
+    has no task results, or if there is no reference set of that name.
     """
-    run_dir = Path(run_dir)
+    from .reference import is_reference, resolve_reference
+
+    source = str(run_dir) if is_reference(run_dir) else ""
+    run_dir = resolve_reference(source) if source else Path(run_dir)
     if not run_dir.is_dir():
         raise BenchError(
             f"results directory {run_dir} does not exist; expected a directory written by "
@@ -581,4 +586,4 @@ def load_run(run_dir: str | Path, label: str | None = None) -> RunData:
     if label is None:
         model = (summary or {}).get("model") or ordered[0].get("model") or {}
         label = model.get("name") or run_dir.name
-    return RunData(run_dir, str(label), ordered, summary)
+    return RunData(run_dir, str(label), ordered, summary, source)

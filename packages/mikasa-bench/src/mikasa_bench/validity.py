@@ -33,6 +33,7 @@ from .chance import task_chance
 from .errors import BenchError
 from .leaks import LEAK_STATUSES, LEAKS, Leak
 from .metrics import wilson_interval
+from .reference import is_reference, resolve_reference
 from .results import SUMMARY_FILENAME, atomic_write_json, load_run
 
 __all__ = [
@@ -116,8 +117,12 @@ class TaskValidity:
         }
 
 
-def _run_dirs(path: Path) -> list[Path]:
-    """``path`` if it holds task result files, else its subdirectories that do."""
+def _run_dirs(given: str | Path) -> list[Path]:
+    """``given`` if it holds task result files, else its subdirectories that do; a shipped
+    ``reference:<name>`` set is its own directory."""
+    if is_reference(given):
+        return [resolve_reference(str(given))]
+    path = Path(given)
     if not path.is_dir():
         raise BenchError(f"results directory {path} does not exist")
 
@@ -150,7 +155,7 @@ def collect_tallies(dirs: Iterable[str | Path]) -> tuple[dict[str, dict[str, Tal
     tallies: dict[str, dict[str, Tally]] = {}
     notes: list[str] = []
     for given in dirs:
-        for run_dir in _run_dirs(Path(given)):
+        for run_dir in _run_dirs(given):
             run = load_run(run_dir)
             for result in run.results:
                 target = _target(result)
