@@ -542,6 +542,33 @@ def test_resume_from_journal_neither_loses_nor_duplicates(tmp_path):
         )
 
 
+def test_run_audit_counts_sessions_and_flags_repeats(tmp_path, capsys):
+    """benchmarks/run_audit.py: a run finished over two sessions audits clean, with each
+    session's episodes; a journal line written twice or torn is flagged."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "run_audit.py"
+    spec = importlib.util.spec_from_file_location("run_audit", path)
+    run_audit = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(run_audit)
+    store = _store(tmp_path, n=2)
+    store.begin_session({"name": "local", "workers": 2})
+    store.record_episode(_task().env_id, 0, EpisodeResult(True, 1.0, 7, 1000), action_chunk_size=1, wall_s=0.1)
+    again = RunStore.open(store.run_dir)  # as after kill -9: the second session resumes
+    again.begin_session({"name": "local", "workers": 4})
+    for env_id, i in [(_task().env_id, 1), ("FindImposterColor3-VLA-v0", 0), ("FindImposterColor3-VLA-v0", 1)]:
+        again.record_episode(env_id, i, EpisodeResult(False, 0.0, 5, 1000 + i), action_chunk_size=1, wall_s=0.1)
+    report = run_audit.audit(store.run_dir)
+    assert report["ok"] and report["missing"] == 0 and report["env_steps"] == 22
+    assert [(s["workers"], s["episodes"], s["env_steps"]) for s in report["sessions"]] == [(2, 1, 7), (4, 3, 15)]
+    lines = store.journal_path.read_text().splitlines()
+    with open(store.journal_path, "a") as f:
+        f.write(lines[0] + "\n" + '{"env_id": "Rem')
+    assert run_audit.main([str(store.run_dir)]) == 1
+    out = capsys.readouterr().out
+    assert "1 recorded twice, 1 torn journal lines" in out and "NOT OK" in out
+
+
 def test_fresh_run_refuses_non_empty_dir_and_resume_checks_protocol(tmp_path):
     store = _store(tmp_path)
     with pytest.raises(BenchError, match="--resume"):

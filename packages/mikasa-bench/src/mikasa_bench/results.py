@@ -389,6 +389,7 @@ class RunStore:
         if execution is not None:
             record["execution"] = dict(execution)
         self.meta.setdefault("sessions", []).append(record)
+        self._save_meta()  # on disk at once: a session killed before any task ends still counts
 
     def wall_time_s(self) -> float:
         """Wall time of all sessions so far, this one included."""
@@ -446,6 +447,9 @@ class RunStore:
             rec["video"] = video
         if render is not None:
             rec["render"] = render
+        if self._session is not None:
+            # Which session ran it (index into run.json's sessions): per-session throughput.
+            rec["session"] = len(self.meta["sessions"]) - 1
         with open(self.journal_path, "a", encoding="utf-8") as f:
             f.write(json.dumps(rec) + "\n")
             f.flush()
