@@ -184,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser("report", help="write report.md and report.html for result dirs")
     rep.add_argument(
-        "dirs", nargs="+", metavar="DIR", help="result dirs, or reference:oracle / reference:zero"
+        "dirs", nargs="+", metavar="DIR", help="result dirs, or shipped sets (reference:NAME)"
     )
     rep.add_argument(
         "--out",

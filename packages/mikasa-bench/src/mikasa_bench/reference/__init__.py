@@ -7,7 +7,7 @@ run can be compared with them without re-running anything::
 
 Each ``<name>/`` folder here is a results directory as `mikasa-bench run` writes it
 (``<env_id>.json`` per task, ``summary.json``), without the episode journal. How and on
-which machine each set was made: ``docs/reference_results.md`` in the repository.
+which machine each set was made: ``docs/reference_results/README.md`` in the repository.
 """
 
 from __future__ import annotations
