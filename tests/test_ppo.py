@@ -133,8 +133,10 @@ TINY = ["--num-envs", "2", "--num-eval-envs", "1", "--num-steps", "8", "--num-ev
 
 def test_state_trainer_runs_two_iterations_and_reloads_its_checkpoint(ppo, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    ppo.main(["--env-id", ENV_ID, "--include-state", *TINY])
+    ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--initial-logstd", "-2"])
     assert sorted(p.name for p in tmp_path.rglob("*.pt")) == ["ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
+    logstd = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)["actor_logstd"]
+    assert logstd.shape == (1, 8) and torch.allclose(logstd, torch.full_like(logstd, -2.0), atol=0.05)
     assert any(tmp_path.rglob("events.out.tfevents.*"))
     result = ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--evaluate", "--checkpoint",
                        str(next(tmp_path.rglob("final_ckpt.pt")))])
@@ -151,8 +153,10 @@ def test_rgb_joints_trainer_runs_two_iterations(ppo, tmp_path, monkeypatch):
 
 def test_lstm_trainer_runs_two_iterations_in_rgb_joints(ppo_lstm, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    ppo_lstm.main(["--env-id", ENV_ID, "--include-rgb", "--include-joints", *TINY, "--lstm-hidden-size", "32"])
+    ppo_lstm.main(["--env-id", ENV_ID, "--include-rgb", "--include-joints", *TINY, "--lstm-hidden-size", "32",
+                   "--initial-logstd", "-1.5"])
     state = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)
+    assert torch.allclose(state["actor_logstd"], torch.full((1, 8), -1.5), atol=0.05)
     assert state["lstm.weight_hh_l0"].shape == (4 * 32, 32)
     assert state["feature_net.extractors.proprio.0.weight"].shape == (256, 25)  # 256 wide in the LSTM script
 

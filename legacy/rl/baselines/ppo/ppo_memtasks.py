@@ -53,10 +53,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     eval_envs.reset(seed=run.env_seed)
     action_dim = int(np.prod(envs.single_action_space.shape))
     if mode == "state":
-        agent = AgentStateOnly(flatten_state_obs(next_obs).shape[1], action_dim).to(device)
+        agent = AgentStateOnly(flatten_state_obs(next_obs).shape[1], action_dim, args.initial_logstd).to(device)
         agent_input = flatten_state_obs
     else:
-        agent = Agent(next_obs, action_dim).to(device)
+        agent = Agent(next_obs, action_dim, args.initial_logstd).to(device)
         agent_input = lambda obs: obs  # noqa: E731
     if args.checkpoint:
         agent.load_state_dict(torch.load(args.checkpoint, map_location=device, weights_only=True))

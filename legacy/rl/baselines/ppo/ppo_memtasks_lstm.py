@@ -55,7 +55,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     next_obs, _ = envs.reset(seed=run.env_seed)
     eval_envs.reset(seed=run.env_seed)
     action_dim = int(np.prod(envs.single_action_space.shape))
-    agent = AgentLSTM(next_obs, action_dim, args.lstm_hidden_size, args.lstm_num_layers, args.lstm_dropout).to(device)
+    agent = AgentLSTM(
+        next_obs, action_dim, args.lstm_hidden_size, args.lstm_num_layers, args.lstm_dropout, args.initial_logstd
+    ).to(device)
     if args.checkpoint:
         agent.load_state_dict(torch.load(args.checkpoint, map_location=device, weights_only=True))
     optimizer = optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)

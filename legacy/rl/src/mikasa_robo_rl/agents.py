@@ -26,6 +26,7 @@ from torch.distributions.normal import Normal
 __all__ = [
     "CKPT_NAME",
     "CKPT_SUBDIR",
+    "INITIAL_LOGSTD",
     "Agent",
     "AgentLSTM",
     "AgentStateOnly",
@@ -37,6 +38,8 @@ __all__ = [
 ]
 
 HIDDEN = 256
+INITIAL_LOGSTD = -0.5
+"""The actor's initial log std per action dimension (upstream's; std 0.61)."""
 CKPT_SUBDIR = "oracle_checkpoints/ppo_memtasks/state/normalized_dense"
 """Where the release kept its PPO state agents, under a checkpoint root, per env id."""
 CKPT_NAME = "final_success_ckpt.pt"
@@ -96,12 +99,12 @@ class AgentStateOnly(_GaussianHeads):
     Gaussian with the state-independent ``actor_logstd`` (shape ``(1, action_dim)``).
     """
 
-    def __init__(self, obs_dim: int, action_dim: int) -> None:
+    def __init__(self, obs_dim: int, action_dim: int, initial_logstd: float = INITIAL_LOGSTD) -> None:
         super().__init__()
         self.obs_dim, self.action_dim = int(obs_dim), int(action_dim)
         self.critic = _mlp(self.obs_dim, 1, out_std=1.0)
         self.actor_mean = _mlp(self.obs_dim, self.action_dim, out_std=0.01 * math.sqrt(2))
-        self.actor_logstd = nn.Parameter(torch.ones(1, self.action_dim) * -0.5)
+        self.actor_logstd = nn.Parameter(torch.ones(1, self.action_dim) * initial_logstd)
 
     def get_value(self, x: torch.Tensor) -> torch.Tensor:
         """V(x), shape ``(B, 1)``."""
@@ -182,7 +185,9 @@ class Agent(_GaussianHeads):
     ``Linear(F, 512)-ReLU-Linear(512, 1)`` and actor mean ``Linear(F, 512)-ReLU-
     Linear(512, action_dim)``; diagonal Gaussian with ``actor_logstd`` as ``AgentStateOnly``."""
 
-    def __init__(self, sample_obs: Mapping[str, torch.Tensor], action_dim: int) -> None:
+    def __init__(
+        self, sample_obs: Mapping[str, torch.Tensor], action_dim: int, initial_logstd: float = INITIAL_LOGSTD
+    ) -> None:
         super().__init__()
         self.feature_net = NatureCNN(sample_obs)
         width = self.feature_net.out_features
@@ -190,7 +195,7 @@ class Agent(_GaussianHeads):
         self.actor_mean = nn.Sequential(
             layer_init(nn.Linear(width, 512)), nn.ReLU(), layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2))
         )
-        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * -0.5)
+        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * initial_logstd)
 
     def get_value(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
         """V(obs), shape ``(B, 1)``."""
@@ -221,7 +226,7 @@ class AgentLSTM(_GaussianHeads):
 
     def __init__(
         self, sample_obs: Mapping[str, torch.Tensor], action_dim: int, hidden_size: int = 512,
-        num_layers: int = 1, dropout: float = 0.0,
+        num_layers: int = 1, dropout: float = 0.0, initial_logstd: float = INITIAL_LOGSTD,
     ) -> None:
         super().__init__()
         self.feature_net = NatureCNN(sample_obs, proprio_width=256)
@@ -236,7 +241,7 @@ class AgentLSTM(_GaussianHeads):
             layer_init(nn.Linear(hidden_size, 512)), nn.ReLU(),
             layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2)),
         )
-        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * -0.5)
+        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * initial_logstd)
 
     def initial_state(self, batch: int, device: torch.device | str = "cpu") -> LSTMState:
         """Zero ``(h, c)`` for ``batch`` envs."""

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 import tyro
 
+from mikasa_robo_rl.agents import INITIAL_LOGSTD
 from mikasa_robo_rl.manifest import trainable_horizon
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
@@ -85,6 +86,9 @@ class PPOArgs:
     max_grad_norm: float = 0.5
     target_kl: float | None = 0.2
     reward_scale: float = 1.0
+    initial_logstd: float = INITIAL_LOGSTD
+    """the actor's initial log std (an extension; upstream's -0.5 by default): lower it where
+    sampled actions are too noisy to ever meet a success that needs the arm still"""
     eval_freq: int = 25
     """evaluate and checkpoint when iteration % eval_freq == 1"""
     save_train_video_freq: int | None = None
