@@ -87,8 +87,7 @@ class PPOArgs:
     target_kl: float | None = 0.2
     reward_scale: float = 1.0
     initial_logstd: float = INITIAL_LOGSTD
-    """the actor's initial log std (an extension; upstream's -0.5 by default): lower it where
-    sampled actions are too noisy to ever meet a success that needs the arm still"""
+    """the actor's initial log std (an extension; upstream's -0.5 by default), for exploration studies"""
     eval_freq: int = 25
     """evaluate and checkpoint when iteration % eval_freq == 1"""
     save_train_video_freq: int | None = None
