@@ -26,9 +26,12 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from mikasa_bench.results import JOURNAL_FILENAME, META_DIRNAME, RUN_META_FILENAME
+
 
 def _journal(path: Path) -> tuple[list[dict[str, Any]], int]:
-    """Parsed journal records and the number of lines that are not valid JSON."""
+    """Parsed journal records and the number of lines that are not valid JSON. Read-only:
+    `RunStore.open` would cut a torn line away and stop at a bad one, hiding what we count."""
     records, torn = [], 0
     for line in path.read_text(encoding="utf-8").splitlines():
         if not line.strip():
@@ -42,7 +45,8 @@ def _journal(path: Path) -> tuple[list[dict[str, Any]], int]:
 
 def audit(run_dir: Path) -> dict[str, Any]:
     """The audit of ``run_dir`` as a JSON-ready dict (see the module docstring)."""
-    meta_path, journal_path = run_dir / "meta" / "run.json", run_dir / "meta" / "episodes.jsonl"
+    meta_dir = run_dir / META_DIRNAME
+    meta_path, journal_path = meta_dir / RUN_META_FILENAME, meta_dir / JOURNAL_FILENAME
     for path in (meta_path, journal_path):
         if not path.is_file():
             raise SystemExit(

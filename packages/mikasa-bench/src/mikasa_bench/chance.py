@@ -171,7 +171,12 @@ def trace_shape_guess_rate(
     import numpy as np
     import torch
     from mikasa_envs.tasks._trace_shape import TraceShapeCommonVLABaseEnv as env
-    from mikasa_envs.tasks._trace_shape import advance_latches, checkpoints_of, shape_waypoints
+    from mikasa_envs.tasks._trace_shape import (
+        advance_latches,
+        checkpoints_of,
+        is_closed,
+        shape_waypoints,
+    )
 
     rng = np.random.default_rng(seed)
     elements = lengths[1]
@@ -214,7 +219,7 @@ def trace_shape_guess_rate(
             contour_dist = np.linalg.norm(contour[rows, element] - point[:, None], axis=-1).min(axis=-1)
             checkpoint_dist = np.linalg.norm(truth[rows, element] - point[:, None], axis=-1)
             visited = advance_latches(visited, checkpoint_dist, contour_dist, env.CHECKPOINT_RADIUS, env.STRAY_RADIUS)
-            closed = visited.all(axis=-1) & (checkpoint_dist[:, 0] < env.CHECKPOINT_RADIUS) & (active < count)
+            closed = is_closed(visited, checkpoint_dist, env.CHECKPOINT_RADIUS) & (active < count)
             active += closed
             visited[closed] = False
         passed += int((active >= count).sum())

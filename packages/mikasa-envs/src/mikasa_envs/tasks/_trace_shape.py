@@ -105,6 +105,12 @@ def advance_latches(visited, checkpoint_dist, contour_dist, checkpoint_radius: f
     return visited | (near & (visited[..., :1] | near[..., :1]))
 
 
+def is_closed(visited, checkpoint_dist, checkpoint_radius: float):
+    """An element is closed when all its checkpoints are latched and the cube is back within
+    ``checkpoint_radius`` of checkpoint 0. Operators only, as `advance_latches`."""
+    return visited.all(-1) & (checkpoint_dist[..., 0] < checkpoint_radius)
+
+
 class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
     """Scene, shape draws, demonstration timeline and checkpoint scoring of both trace families.
 
@@ -334,7 +340,7 @@ class TraceShapeCommonVLABaseEnv(MikasaVLABaseEnv):
             visit_fraction=visited.float().mean(dim=-1),
             all_visited=all_visited,
             start_checkpoint_dist=start_dist,
-            is_closed=all_visited & (start_dist < self.CHECKPOINT_RADIUS),
+            is_closed=is_closed(visited, distances, self.CHECKPOINT_RADIUS),
             nearest_unvisited_dist=nearest_unvisited.values,
             nearest_unvisited_index=torch.where(all_visited, 0, nearest_unvisited.indices),
         )
