@@ -675,13 +675,18 @@ def test_reference_results_ship_and_compare(tmp_path, capsys):
     assert cli.main(["compare", "reference:oracle", str(mine)]) == 1
     assert "significantly worse than A on 1 task(s): RememberColor3-VLA-v0" in capsys.readouterr().out
     assert cli.main(["compare", "reference:nope", str(mine)]) == 2
-    assert "accepted: reference:oracle" in capsys.readouterr().err
+    assert "accepted: reference:oracle, reference:zero" in capsys.readouterr().err
     assert cli.main(["report", "reference:oracle"]) == 2
     assert "give --out DIR" in capsys.readouterr().err
     assert cli.main(["report", "reference:oracle", str(mine), "--out", str(tmp_path / "r")]) == 0
     assert "| results | reference:oracle |" in (tmp_path / "r" / REPORT_MD).read_text()
     assert cli.main(["validity", "reference:oracle", "--out", str(tmp_path / "v.md")]) == 0
     assert "RememberColor3-VLA-v0" in (tmp_path / "v.md").read_text()
+    zero = load_run("reference:zero")
+    assert zero.summary["complete"] and zero.summary["n_episodes_total"] == 4500
+    assert [r["env_id"] for r in zero.results] == [r["env_id"] for r in ref.results]
+    assert zero.protocol == ref.protocol
+    assert not any(any(r["successes"]) for r in zero.results)
 
 
 def test_cli_usage_errors(tmp_path, capsys):
