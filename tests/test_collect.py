@@ -375,3 +375,46 @@ def test_split_selects_the_manifests_tasks_in_order():
     short = selected_env_ids(None, "short")
     assert short == [t.env_id for t in list_tasks(split="short")] and 0 < len(short) < 90
     assert selected_env_ids([ENV_ID, "ShellGameTouch-VLA-v0"], None) == [ENV_ID, "ShellGameTouch-VLA-v0"]
+
+
+def _collect_throughput_module():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "collect_throughput.py"
+    spec = importlib.util.spec_from_file_location("collect_throughput", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_plan_projection_fits_the_per_episode_cost(capsys):
+    """benchmarks/collect_throughput.py: from long runs costing a worker 0.5 s per episode
+    plus 10 ms per frame, the projection recovers both and adds the start-up per task;
+    without two long runs it falls back to the families' rates and says so."""
+    ct = _collect_throughput_module()
+    workers, a, b = 16, 0.5, 0.010
+
+    def row(family, frames_per_episode, episodes, startup=10.0, success=1.0):
+        per_min = 60.0 * workers / (a + b * frames_per_episode)
+        return {
+            "path": "collect", "family": family, "env_id": f"{family}-v0", "workers": workers,
+            "episodes": episodes, "frames": frames_per_episode * episodes, "startup_s": startup,
+            "steady_episodes_per_min": per_min, "success_rate": success, "horizon": 100,
+            "bytes": 1000 * frames_per_episode * episodes,
+        }
+
+    tasks = [("short", 100, "short-v0", True, True), ("long", 100, "long-v0", True, True),
+             ("long", 200, "long2-v0", True, True), ("short", 50, "hidden-v0", True, False)]
+    rows = [row("short", 20, 256), row("long", 100, 256, success=0.5)]
+    plan = ct.project_plan(rows, tasks, 160)
+    assert plan["model"]["episode_s"] == pytest.approx(a, abs=1e-3)
+    assert plan["model"]["frame_s"] == pytest.approx(b, abs=1e-5)
+    # short: 160 x (0.5 + 0.2) / 16; long: twice the attempts, 160 x 2 x (0.5 + 1.0) / 16;
+    # long2 (horizon 200): 200 frames, 160 x 2 x (0.5 + 2.0) / 16; 10 s start-up each.
+    expected = 3 * 10 + 160 * 0.7 / 16 + 320 * 1.5 / 16 + 320 * 2.5 / 16
+    assert plan["hours"] == pytest.approx(expected / 3600, abs=0.006)
+    assert plan["frames"] == 160 * (20 + 100 + 200) and plan["tasks"] == 3
+    assert plan["disk_gb"] == pytest.approx(160 * 320 * 1000 / 1e9, abs=0.05)
+    fallback = ct.project_plan([row("short", 20, 32), row("long", 100, 32)], tasks, 160)
+    assert fallback["model"] is None
+    assert "pessimistic" in capsys.readouterr().out

@@ -1,0 +1,325 @@
+"""Oracle-demonstration collection throughput, and what the whole published plan costs.
+
+Collects oracle episodes with ``mikasa-collect``'s own code (``mikasa_oracles.collect``) for
+the shortest task of every task family (``--families`` picks some) and each worker count
+of ``--workers``, in the simulator's environment (``--sim-python``; default ``.venv``, so
+this script also runs from the conversion environment), and prints per run episodes/min
+overall and after start-up (from the first finished attempt on), frames per episode, and
+NPZ bytes::
+
+    python benchmarks/collect_throughput.py --episodes 8 --workers 1,2          # 2-core machine
+    python benchmarks/collect_throughput.py --episodes 32 --workers 16 --project \\
+        --sim-python "$(command -v python)" --json collect32.json              # 16-core machine
+
+``--project [EPISODES]`` projects the whole plan (EPISODES, default 250 as published, of each
+of the 90 canonical tasks: ``mikasa-collect --split all``) with the largest worker count
+measured: frames, hours and NPZ disk. Per task, frames per episode come from its family's
+representative, scaled by the task's horizon (the variants of a family differ mostly in
+phase lengths), and bytes from the representative's bytes per frame.
+
+Time. A worker rebuilds its scene for every attempt (``reset(options={"reconfigure":
+True})``: the files must not depend on which worker ran which seed), so an episode costs a
+fixed part plus a part per frame. Runs where every worker played at least
+`LONG_RUN_EPISODES_PER_WORKER` episodes time that steady state; from two or more of them
+(different episode lengths) the script fits ``seconds per episode per worker = a + b x
+frames`` and projects every task as ``start-up + episodes x (a + b x frames per episode) /
+(workers x yield)``, where ``yield`` is the family's share of successful attempts and
+start-up (the workers' imports and first scene, paid once per task) is the median over the
+runs. Short runs are dominated by start-up and under-state the steady rate several times
+(on the GPU machine 32 episodes on 16 workers ran at 1/2-1/6 of the rate 256 did); without
+two long runs the projection falls back to each family's after-start-up rate and says that
+it is pessimistic.
+
+``--rows-from FILE`` (repeatable) reads rows written earlier with ``--json`` instead of
+collecting, e.g. a short run of every family plus long runs of a few::
+
+    python benchmarks/collect_throughput.py --rows-from collect32.json \\
+        --rows-from collect256.json --project
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+SIM_PYTHON = REPO / ".venv" / "bin" / "python"
+"""The simulator's interpreter (``--sim-python`` replaces it, e.g. on a machine whose own
+Python has the packages)."""
+
+LONG_RUN_EPISODES_PER_WORKER = 8
+"""A run times the steady state when each of its workers played this many episodes."""
+
+
+def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
+    """(In the simulator's environment) collect, print the summary as one JSON line."""
+    from mikasa_oracles.collect import collect
+
+    s = collect(env_id, episodes, out, workers=workers, progress=False)
+    row = {
+        "env_id": env_id,
+        "workers": workers,
+        "episodes": s.new_episodes,
+        "frames": s.frames,
+        "wall_s": round(s.wall_s, 2),
+        "episodes_per_min": round(s.episodes_per_min, 1),
+        "startup_s": None if s.startup_s is None else round(s.startup_s, 2),
+        "steady_episodes_per_min": round(s.steady_episodes_per_min, 1),
+        "success_rate": round(s.success_rate, 3),
+    }
+    print("COLLECT " + json.dumps(row), flush=True)
+
+
+def manifest_rows(sim_python: Path) -> list[tuple[str, int, str, bool, bool]]:
+    """(family, horizon, env id, registered, canonical) of every manifest task, read in the
+    simulator's environment."""
+    code = (
+        "import json, mikasa_envs\n"
+        "from mikasa_envs.manifest import list_tasks\n"
+        "reg = set(mikasa_envs.registered_env_ids())\n"
+        "rows = [(t.family, t.max_episode_steps, t.env_id, t.env_id in reg, t.canonical)\n"
+        "        for t in list_tasks()]\n"
+        "print('FAMILIES ' + json.dumps(rows))\n"
+    )
+    out = subprocess.run(
+        [str(sim_python), "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    return json.loads(next(line for line in out.splitlines() if line.startswith("FAMILIES "))[9:])
+
+
+def family_representatives(rows: list) -> tuple[dict[str, tuple[int, str]], list[str]]:
+    """(family -> (horizon, env id) of its shortest-horizon registered task, families
+    without envs)."""
+    chosen: dict[str, tuple[int, str]] = {}
+    for family, horizon, env_id, registered, _canonical in rows:
+        if registered and (family not in chosen or horizon < chosen[family][0]):
+            chosen[family] = (horizon, env_id)
+    missing = sorted({family for family, *_ in rows} - set(chosen))
+    return dict(sorted(chosen.items())), missing
+
+
+def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[dict]:
+    """Collect ``--episodes`` oracle episodes per family representative (of ``--families``,
+    default all) and per count of ``--workers``; one row per run."""
+    workers = [int(w) for w in args.workers.split(",")]
+    reps, missing = family_representatives(tasks)
+    if args.families:
+        only = set(args.families.split(","))
+        unknown = sorted(only - set(reps))
+        if unknown:
+            raise SystemExit(f"unknown --families {unknown}; accepted: {', '.join(reps)}")
+        reps = {f: e for f, e in reps.items() if f in only}
+    print(
+        f"collection: {args.episodes} episodes per run; families without envs yet: {len(missing)}"
+    )
+    rows = []
+    for family, (horizon, env_id) in reps.items():
+        for w in workers:
+            out = work / f"collect_{family}_{w}"
+            proc = subprocess.run(
+                [
+                    str(args.sim_python),
+                    __file__,
+                    "--_child",
+                    env_id,
+                    str(args.episodes),
+                    str(w),
+                    str(out),
+                ],
+                capture_output=True,
+                text=True,
+            )
+            lines = [x for x in proc.stdout.splitlines() if x.startswith("COLLECT ")]
+            if proc.returncode != 0 or not lines:
+                raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
+            row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
+            row["horizon"] = horizon
+            row["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+            print(
+                f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min, "
+                f"{row['steady_episodes_per_min']:>6.1f} after start-up ({row['episodes']} ep, {row['frames']} frames, "
+                f"{row['wall_s']:.1f} s, start-up {row['startup_s']} s, success {row['success_rate']:.0%})",
+                flush=True,
+            )
+            rows.append(row)
+            shutil.rmtree(out, ignore_errors=True)
+    for family in missing:
+        print(f"collect {family:<30} (no env yet)")
+    return rows
+
+
+def _seconds_per_episode(row: dict) -> float:
+    """A worker's wall seconds per kept episode in the run's steady state."""
+    return row["workers"] * 60.0 / row["steady_episodes_per_min"]
+
+
+def fit_episode_cost(rows: list[dict]) -> dict | None:
+    """Least-squares ``seconds per kept episode per worker = a + b x frames per episode``
+    over the long runs (`LONG_RUN_EPISODES_PER_WORKER`); None without two long runs of
+    different episode lengths."""
+    long_rows = [r for r in rows if r["episodes"] >= LONG_RUN_EPISODES_PER_WORKER * r["workers"]]
+    x = np.array([r["frames"] / r["episodes"] for r in long_rows])
+    if len(long_rows) < 2 or np.ptp(x) == 0:
+        return None
+    y = np.array([_seconds_per_episode(r) for r in long_rows])
+    b, a = np.polyfit(x, y, 1)
+    return {
+        "episode_s": round(float(a), 4),
+        "frame_s": round(float(b), 5),
+        "runs": [f"{r['env_id']} ({r['episodes']} ep)" for r in long_rows],
+        "max_rel_error": round(float(np.max(np.abs(a + b * x - y) / y)), 3),
+    }
+
+
+def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
+    """The whole published plan (``episodes_per_task`` successful episodes of every canonical
+    task) projected from the measured families, with the largest worker count measured
+    (the module docstring says how)."""
+    most = max(r["workers"] for r in rows)
+    rows = [r for r in rows if r["workers"] == most and r["episodes"]]
+    by_family: dict[str, list[dict]] = {}
+    for r in rows:
+        by_family.setdefault(r["family"], []).append(r)
+    model = fit_episode_cost(rows)
+    startup = statistics.median(r["startup_s"] for r in rows if r["startup_s"] is not None)
+    frames = seconds = size = 0.0
+    parts = {"startup": 0.0, "episodes": 0.0, "frames": 0.0}  # the model's three terms, seconds
+    covered, uncovered = 0, {}
+    for family, horizon, env_id, _registered, canonical in tasks:
+        if not canonical:
+            continue
+        runs = by_family.get(family)
+        if not runs:
+            uncovered.setdefault(family, []).append(env_id)
+            continue
+        run_frames = sum(r["frames"] for r in runs)
+        per_episode = run_frames / sum(r["episodes"] for r in runs) * horizon / runs[0]["horizon"]
+        task_frames = episodes_per_task * per_episode
+        if model:
+            attempts = sum(r["episodes"] / r["success_rate"] for r in runs) / sum(
+                r["episodes"] for r in runs
+            )
+            parts["startup"] += startup
+            parts["episodes"] += episodes_per_task * attempts * model["episode_s"] / most
+            parts["frames"] += episodes_per_task * attempts * model["frame_s"] * per_episode / most
+        else:
+            best = max(runs, key=lambda r: r["episodes"])
+            seconds += task_frames / (
+                best["steady_episodes_per_min"] / 60 * best["frames"] / best["episodes"]
+            )
+        frames += task_frames
+        size += task_frames * sum(r["bytes"] for r in runs) / run_frames
+        covered += 1
+    plan = {
+        "path": "plan",
+        "workers": most,
+        "episodes_per_task": episodes_per_task,
+        "tasks": covered,
+        "tasks_not_measured": uncovered,
+        "frames": int(frames),
+        "hours": round((seconds + sum(parts.values())) / 3600, 2),
+        "hours_by_part": {k: round(v / 3600, 2) for k, v in parts.items()} if model else None,
+        "startup_s_per_task": startup if model else None,
+        "model": model,
+        "disk_gb": round(size / 1e9, 1),
+    }
+    how = (
+        f"a + b x frames per episode per worker, a = {model['episode_s']:.3f} s, b = "
+        f"{1000 * model['frame_s']:.2f} ms (fit on {len(model['runs'])} long runs, worst "
+        f"{model['max_rel_error']:.0%} off), start-up {startup:.1f} s per task; hours of frames "
+        f"{parts['frames'] / 3600:.2f}, of per-episode cost {parts['episodes'] / 3600:.2f}, of "
+        f"start-up {parts['startup'] / 3600:.2f}"
+        if model
+        else "each family's after-start-up rate of its longest run (no two runs long enough to "
+        "fit the per-episode cost: pessimistic when the runs were short)"
+    )
+    print(
+        f"plan: {covered} canonical tasks x {episodes_per_task} episodes ~ {plan['frames'] / 1e6:.2f} M frames, "
+        f"~{plan['hours']:.2f} h with {most} worker(s), ~{plan['disk_gb']:.1f} GB of NPZ; time from {how}"
+        + (
+            f"; not counted: {sum(map(len, uncovered.values()))} tasks of the {len(uncovered)} "
+            "families not measured"
+            if uncovered
+            else ""
+        ),
+        flush=True,
+    )
+    return plan
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--episodes", type=int, default=8, help="episodes per run (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--workers", default="1,2", help="worker counts to collect with (default: %(default)s)"
+    )
+    parser.add_argument("--families", help="comma-separated families (default: all with envs)")
+    parser.add_argument(
+        "--project",
+        type=int,
+        nargs="?",
+        const=250,
+        metavar="EPISODES",
+        help="project the whole plan, EPISODES (default 250, the published count) per "
+        "canonical task, from the measured families",
+    )
+    parser.add_argument(
+        "--rows-from",
+        type=Path,
+        action="append",
+        metavar="FILE",
+        help="rows written earlier with --json, instead of collecting (repeatable)",
+    )
+    parser.add_argument(
+        "--sim-python",
+        default=str(SIM_PYTHON),
+        help="the simulator's Python (default: %(default)s)",
+    )
+    parser.add_argument("--json", type=Path, help="also write the rows (and the plan) as JSON here")
+    parser.add_argument("--_child", nargs=4, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args._child:
+        env_id, episodes, workers, out = args._child
+        collect_child(env_id, int(episodes), int(workers), out)
+        return 0
+    if not Path(args.sim_python).is_file():
+        raise SystemExit(
+            f"no simulator environment at {args.sim_python} (scripts/setup.sh, or --sim-python)"
+        )
+    tasks = manifest_rows(Path(args.sim_python))
+    if args.rows_from:
+        rows = [
+            r
+            for f in args.rows_from
+            for r in json.loads(f.read_text())
+            if r.get("path") == "collect"
+        ]
+        if not rows:
+            raise SystemExit(f"no collection rows in {', '.join(map(str, args.rows_from))}")
+    else:
+        work = Path(tempfile.mkdtemp(prefix="mikasa-collect-bench-"))
+        try:
+            rows = collection_rows(args, tasks, work)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+    if args.project:
+        rows = rows + [project_plan(rows, tasks, args.project)]
+    if args.json:
+        tmp = args.json.with_name(args.json.name + ".tmp")
+        tmp.write_text(json.dumps(rows, indent=2) + "\n")
+        tmp.replace(args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
