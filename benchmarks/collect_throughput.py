@@ -12,8 +12,8 @@ NPZ bytes::
         --sim-python "$(command -v python)" --json collect32.json              # 16-core machine
 
 ``--project [EPISODES]`` projects the whole plan (EPISODES, default 250 as published, of each
-of the 90 canonical tasks: ``mikasa-collect --split all``) with the largest worker count
-measured: frames, hours and NPZ disk. Per task, frames per episode come from its family's
+of the 90 canonical tasks: ``mikasa-collect --split all``) with the most envs collecting at
+once that were measured (worker processes x ``--envs-per-worker``): frames, hours and NPZ disk. Per task, frames per episode come from its family's
 representative, scaled by the task's horizon (the variants of a family differ mostly in
 phase lengths), and bytes from the representative's bytes per frame.
 
@@ -59,14 +59,15 @@ LONG_RUN_EPISODES_PER_WORKER = 8
 """A run times the steady state when each of its workers played this many episodes."""
 
 
-def collect_child(env_id: str, episodes: int, workers: int, out: str) -> None:
+def collect_child(env_id: str, episodes: int, workers: int, envs: int, out: str) -> None:
     """(In the simulator's environment) collect, print the summary as one JSON line."""
     from mikasa_oracles.collect import collect
 
-    s = collect(env_id, episodes, out, workers=workers, progress=False)
+    s = collect(env_id, episodes, out, workers=workers, envs_per_worker=envs, progress=False)
     row = {
         "env_id": env_id,
         "workers": workers,
+        "envs_per_worker": envs,
         "episodes": s.new_episodes,
         "frames": s.frames,
         "wall_s": round(s.wall_s, 2),
@@ -132,6 +133,7 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
                     env_id,
                     str(args.episodes),
                     str(w),
+                    str(args.envs_per_worker),
                     str(out),
                 ],
                 capture_output=True,
@@ -144,7 +146,7 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
             row["horizon"] = horizon
             row["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
             print(
-                f"collect {family:<30} {env_id:<34} {w} worker(s) {row['episodes_per_min']:>6.1f} episodes/min, "
+                f"collect {family:<30} {env_id:<34} {w}x{args.envs_per_worker} env(s) {row['episodes_per_min']:>6.1f} episodes/min, "
                 f"{row['steady_episodes_per_min']:>6.1f} after start-up ({row['episodes']} ep, {row['frames']} frames, "
                 f"{row['wall_s']:.1f} s, start-up {row['startup_s']} s, success {row['success_rate']:.0%})",
                 flush=True,
@@ -158,14 +160,19 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
 
 def _seconds_per_episode(row: dict) -> float:
     """A worker's wall seconds per kept episode in the run's steady state."""
-    return row["workers"] * 60.0 / row["steady_episodes_per_min"]
+    return _runners(row) * 60.0 / row["steady_episodes_per_min"]
+
+
+def _runners(row: dict) -> int:
+    """Envs collecting at once in a run: worker processes x envs per process."""
+    return row["workers"] * row.get("envs_per_worker", 1)
 
 
 def fit_episode_cost(rows: list[dict]) -> dict | None:
     """Least-squares ``seconds per kept episode per worker = a + b x frames per episode``
     over the long runs (`LONG_RUN_EPISODES_PER_WORKER`); None without two long runs of
     different episode lengths."""
-    long_rows = [r for r in rows if r["episodes"] >= LONG_RUN_EPISODES_PER_WORKER * r["workers"]]
+    long_rows = [r for r in rows if r["episodes"] >= LONG_RUN_EPISODES_PER_WORKER * _runners(r)]
     x = np.array([r["frames"] / r["episodes"] for r in long_rows])
     if len(long_rows) < 2 or np.ptp(x) == 0:
         return None
@@ -181,10 +188,10 @@ def fit_episode_cost(rows: list[dict]) -> dict | None:
 
 def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
     """The whole published plan (``episodes_per_task`` successful episodes of every canonical
-    task) projected from the measured families, with the largest worker count measured
+    task) projected from the measured families, with the most envs collecting at once measured
     (the module docstring says how)."""
-    most = max(r["workers"] for r in rows)
-    rows = [r for r in rows if r["workers"] == most and r["episodes"]]
+    most = max(_runners(r) for r in rows)
+    rows = [r for r in rows if _runners(r) == most and r["episodes"]]
     by_family: dict[str, list[dict]] = {}
     for r in rows:
         by_family.setdefault(r["family"], []).append(r)
@@ -220,7 +227,7 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
         covered += 1
     plan = {
         "path": "plan",
-        "workers": most,
+        "runners": most,
         "episodes_per_task": episodes_per_task,
         "tasks": covered,
         "tasks_not_measured": uncovered,
@@ -243,7 +250,7 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
     )
     print(
         f"plan: {covered} canonical tasks x {episodes_per_task} episodes ~ {plan['frames'] / 1e6:.2f} M frames, "
-        f"~{plan['hours']:.2f} h with {most} worker(s), ~{plan['disk_gb']:.1f} GB of NPZ; time from {how}"
+        f"~{plan['hours']:.2f} h with {most} env(s) collecting at once, ~{plan['disk_gb']:.1f} GB of NPZ; time from {how}"
         + (
             f"; not counted: {sum(map(len, uncovered.values()))} tasks of the {len(uncovered)} "
             "families not measured"
@@ -262,6 +269,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--workers", default="1,2", help="worker counts to collect with (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--envs-per-worker",
+        type=int,
+        default=1,
+        help="envs per worker process, in threads rendering together (default: %(default)s)",
     )
     parser.add_argument("--families", help="comma-separated families (default: all with envs)")
     parser.add_argument(
@@ -286,11 +299,11 @@ def main(argv: list[str] | None = None) -> int:
         help="the simulator's Python (default: %(default)s)",
     )
     parser.add_argument("--json", type=Path, help="also write the rows (and the plan) as JSON here")
-    parser.add_argument("--_child", nargs=4, help=argparse.SUPPRESS)
+    parser.add_argument("--_child", nargs=5, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args._child:
-        env_id, episodes, workers, out = args._child
-        collect_child(env_id, int(episodes), int(workers), out)
+        env_id, episodes, workers, envs, out = args._child
+        collect_child(env_id, int(episodes), int(workers), int(envs), out)
         return 0
     if not Path(args.sim_python).is_file():
         raise SystemExit(

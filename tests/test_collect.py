@@ -202,6 +202,14 @@ def test_two_workers_write_what_one_worker_writes(tmp_path):
     assert tree(tmp_path / "two" / "data") == files
 
 
+def test_envs_in_threads_write_what_one_worker_writes(reference, tmp_path):
+    """--envs-per-worker: one process running two envs in threads (their cameras rendered
+    in shared passes) writes the in-process collection's bytes."""
+    threaded = run(tmp_path, workers=1, envs_per_worker=2)
+    assert threaded.new_episodes == N
+    assert tree(tmp_path / "data") == tree(reference / "data")
+
+
 def test_several_tasks_in_one_command_write_what_each_alone_writes(reference, tmp_path, capsys):
     other, other_name = "FindImposterColor3-VLA-v0", "find_imposter_color_3_vla_v0"
     with chdir(tmp_path / "both"):
@@ -321,6 +329,8 @@ def test_ray_executor_writes_what_local_workers_write(reference, tmp_path, capsy
         (["--env-id", ENV_ID, "--num-episodes", "0"], "must be >= 1"),
         (["--env-id", ENV_ID, "--num-episodes", "-3"], "must be >= 1"),
         (["--env-id", ENV_ID, "--workers", "0"], "must be >= 1"),
+        (["--env-id", ENV_ID, "--envs-per-worker", "0"], "must be >= 1"),
+        (["--env-id", ENV_ID, "--envs-per-worker", "2", "--executor", "ray"], "needs the local executor"),
         (["--env-id", ENV_ID, "--max-attempts", "0"], "must be >= 1"),
         (["--env-id", ENV_ID, "--start-seed", "-1"], "must be >= 0"),
         (["--env-id", ENV_ID, "--obs-mode", "state"], "unrecognized arguments: --obs-mode"),

@@ -232,11 +232,50 @@ class _AttemptRunner:
 
     def _run(self, seed: int, t0: float) -> AttemptResult:
         from mikasa_datasets.npz import make_episode, write_episode
+        from mikasa_envs.render_batcher import participating
 
         self._ensure_env()
+        max_steps = int(self.env.max_episode_steps)
+        # The rollout (not the env build or the file write) takes part in shared render
+        # passes when this process runs several envs in threads; else a no-op.
+        with participating():
+            frames, language, success, finished = self._rollout(seed, max_steps)
+        length = len(frames["reward"])
+        reward_sum = float(np.sum(np.asarray(frames["reward"], dtype=np.float32), dtype=np.float64))
+        if not success:
+            reason = "unsuccessful" if finished else "timeout"
+            return AttemptResult(seed, False, reason, length, reward_sum, time.perf_counter() - t0)
+        if length < self.min_length:
+            return AttemptResult(
+                seed, False, "too_short", length, reward_sum, time.perf_counter() - t0
+            )
+        episode = make_episode(
+            rgb=np.stack(frames["rgb"]),
+            proprio=np.stack(frames["proprio"]),
+            action=np.stack(frames["action"]),
+            reward=frames["reward"],
+            success=frames["success"],
+            done=frames["done"],
+            language_instruction=language or self.fallback_language,
+            episode_seed=seed,
+        )
+        staged = self.staging_dir / f"{STAGED_PREFIX}{seed}.npz"
+        write_episode(staged, episode, max_episode_steps=max_steps, min_length=self.min_length)
+        return AttemptResult(
+            seed, True, "saved", length, reward_sum, time.perf_counter() - t0, str(staged)
+        )
+
+    def _rollout(
+        self, seed: int, max_steps: int
+    ) -> tuple[dict[str, list[Any]], str | None, bool, bool]:
+        """Play the attempt: (per-step records, language, success, finished)."""
+        from mikasa_envs.render_batcher import global_rng_section
+
         env, oracle = self.env, self.oracle
-        max_steps = int(env.max_episode_steps)
-        seed_global_rngs(seed)
+        # Inside the section: a thread beside this one may be resetting its env, whose
+        # layout is drawn from the (reseeded) global torch RNG.
+        with global_rng_section():
+            seed_global_rngs(seed)
         # A fresh scene: after a plain reset the episode would depend, in the last bits, on
         # the attempts this worker ran before (PhysX contact caches).
         obs, info = env.reset(seed=seed, options={"reconfigure": True})
@@ -264,30 +303,7 @@ class _AttemptRunner:
             frames["done"].append(int(finished))
             if finished:
                 break
-        length = len(frames["reward"])
-        reward_sum = float(np.sum(np.asarray(frames["reward"], dtype=np.float32), dtype=np.float64))
-        if not success:
-            reason = "unsuccessful" if finished else "timeout"
-            return AttemptResult(seed, False, reason, length, reward_sum, time.perf_counter() - t0)
-        if length < self.min_length:
-            return AttemptResult(
-                seed, False, "too_short", length, reward_sum, time.perf_counter() - t0
-            )
-        episode = make_episode(
-            rgb=np.stack(frames["rgb"]),
-            proprio=np.stack(frames["proprio"]),
-            action=np.stack(frames["action"]),
-            reward=frames["reward"],
-            success=frames["success"],
-            done=frames["done"],
-            language_instruction=language or self.fallback_language,
-            episode_seed=seed,
-        )
-        staged = self.staging_dir / f"{STAGED_PREFIX}{seed}.npz"
-        write_episode(staged, episode, max_episode_steps=max_steps, min_length=self.min_length)
-        return AttemptResult(
-            seed, True, "saved", length, reward_sum, time.perf_counter() - t0, str(staged)
-        )
+        return frames, language, success, finished
 
     def close(self) -> None:
         """Close the env (the next attempt builds a fresh one)."""
@@ -430,6 +446,7 @@ def collect(
     out: str | os.PathLike[str] = DEFAULT_OUT,
     *,
     workers: int = 1,
+    envs_per_worker: int = 1,
     start_seed: int = DEFAULT_START_SEED,
     max_attempts: int | None = None,
     min_episode_length: int = DEFAULT_MIN_EPISODE_LENGTH,
@@ -443,7 +460,9 @@ def collect(
     Resumes what is already in ``<out>/data_npz/<dataset_name>/``. ``max_attempts`` bounds
     the attempts of this call (default :func:`default_max_attempts`). ``executor`` "local"
     runs ``workers`` local processes (in-process for 1), "ray" as many Ray actors
-    (``ray_address``, ``$RAY_ADDRESS`` or a local Ray instance); the files are the same. Raises
+    (``ray_address``, ``$RAY_ADDRESS`` or a local Ray instance); the files are the same.
+    ``envs_per_worker`` (local processes only) runs that many envs per process, in threads
+    that render together (on a GPU: fewer render passes); the files are the same. Raises
     :class:`CollectError` for bad input and :class:`CollectionFailed` if the budget runs
     out or a worker crashes; saved episodes stay valid in both cases.
     """
@@ -459,12 +478,15 @@ def collect(
     for name, value, low in (
         ("num_episodes", num_episodes, 1),
         ("workers", workers, 1),
+        ("envs_per_worker", envs_per_worker, 1),
         ("min_episode_length", min_episode_length, 1),
     ):
         if int(value) < low:
             raise CollectError(f"{name} must be >= {low}, got {value}")
     if executor not in EXECUTORS:
         raise CollectError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if envs_per_worker > 1 and executor != "local":
+        raise CollectError(f"envs_per_worker > 1 needs the local executor, got {executor!r}")
     if max_attempts is not None and max_attempts < 1:
         raise CollectError(f"max_attempts must be >= 1, got {max_attempts}")
     if not 0 <= start_seed <= MAX_SEED:
@@ -510,13 +532,18 @@ def collect(
             raise CollectError(f"no seeds left: the next seed {first_seed} exceeds {MAX_SEED}")
         staging.mkdir(parents=True, exist_ok=True)
         runner_args = (env_id, str(staging), min_episode_length, spec.language_instruction)
-        n_workers = min(workers, missing)
+        # Runners in all (processes x envs each), never more than the missing episodes.
+        n_runners = min(workers * envs_per_worker, missing)
         if executor == "ray":
-            pool: Any = RayPool(runner_args, n_workers, address=ray_address)
-        elif n_workers == 1:
+            pool: Any = RayPool(runner_args, n_runners, address=ray_address)
+        elif n_runners == 1:
             pool = InlinePool(runner_args)
         else:
-            pool = ProcessPool(runner_args, n_workers)
+            per_process = min(envs_per_worker, n_runners)
+            pool = ProcessPool(
+                runner_args, -(-n_runners // per_process), envs_per_worker=per_process
+            )
+            n_runners = pool.slots
         log_attempts = (
             log_attempts or os.environ.get("MIKASA_LOG_EPISODE_LENGTHS", "").lower() in _TRUTHY
         )
@@ -540,7 +567,7 @@ def collect(
                 # Never more attempts in flight than episodes could still be missing.
                 staged_ok = sum(r.saved for r in pending.values())
                 while (
-                    len(in_flight) < n_workers
+                    len(in_flight) < n_runners
                     and summary.attempts < budget
                     and next_seed <= MAX_SEED
                     and len(committed) + len(in_flight) + staged_ok < num_episodes

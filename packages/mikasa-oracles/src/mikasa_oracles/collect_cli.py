@@ -95,6 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="parallel workers: local processes, or Ray actors with --executor ray (default 1)",
     )
     p.add_argument(
+        "--envs-per-worker",
+        type=_int_at_least(1),
+        default=1,
+        help="envs per local worker process, run in threads that render together (on a GPU: "
+        "fewer render passes; the same files) (default 1)",
+    )
+    p.add_argument(
         "--executor",
         choices=EXECUTORS,
         default="local",
@@ -173,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 args.num_episodes,
                 args.out,
                 workers=args.workers,
+                envs_per_worker=args.envs_per_worker,
                 start_seed=args.start_seed,
                 max_attempts=args.max_attempts,
                 min_episode_length=args.min_episode_length,

@@ -6,7 +6,9 @@ in flight as the pool has workers and commits them in seed order, so the files d
 on the pool, its size or the timing.
 
 * :class:`InlinePool` — ``--workers 1``: in this process.
-* :class:`ProcessPool` — ``--workers W``: W spawn-started local processes.
+* :class:`ProcessPool` — ``--workers W``: W spawn-started local processes, each running
+  ``--envs-per-worker K`` runners (one env each) in K threads whose envs render together
+  (``mikasa_envs.render_batcher``: on a GPU, K times fewer render passes).
 * :class:`RayPool` — ``--executor ray``: W actors on a Ray cluster (one CPU each, spread over
   the nodes, with an equal share of the cluster's GPUs where it has any, so that they
   render there). Each actor stages its episodes in a directory of its own node and sends
@@ -76,24 +78,30 @@ def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | No
 
 
 def _worker_main(
-    worker_id: int,
+    worker_ids: list[int],
     runner_args: tuple[Any, ...],
     jobs: Any,
     results: Any,
     factory: Callable[..., Any] | None = None,
 ) -> None:
-    """Entry point of a spawn-started worker: run jobs (seeds) from ``jobs`` until ``None``."""
-    from mikasa_envs.workers import serve_jobs  # imported lazily: mikasa_envs loads ManiSkill
+    """Entry point of a spawn-started process: one runner per id of ``worker_ids`` (a thread
+    each when there are several), each running jobs (seeds) from the shared ``jobs`` queue
+    until it gets ``None``."""
+    from mikasa_envs.workers import serve_job_slots  # imported lazily: mikasa_envs loads ManiSkill
 
-    serve_jobs(worker_id, jobs, results, partial(_start_runner, runner_args, factory))
+    start = partial(_start_runner, runner_args, factory)
+    serve_job_slots(worker_ids, [jobs] * len(worker_ids), results, lambda _wid: start())
 
 
 class ProcessPool:
     """``--workers W``: W spawn-started processes sharing one job queue.
 
-    Each builds ``factory(*runner_args)`` (default :class:`_AttemptRunner`; ``factory``
-    must be importable by name, e.g. a module-level class). A job's result names its job
-    in the attribute ``job_attr`` (an attempt's ``seed``).
+    Each process runs ``envs_per_worker`` runners built by ``factory(*runner_args)``
+    (default :class:`_AttemptRunner`; ``factory`` must be importable by name, e.g. a
+    module-level class), in as many threads when there are several (their envs then render
+    in shared passes; a runner's results must not depend on the other threads: the
+    collectors' do not, each attempt building its scene afresh). `slots` runners in all.
+    A job's result names its job in the attribute ``job_attr`` (an attempt's ``seed``).
     """
 
     def __init__(
@@ -102,6 +110,7 @@ class ProcessPool:
         workers: int,
         factory: Callable[..., Any] | None = None,
         *,
+        envs_per_worker: int = 1,
         job_attr: str = "seed",
         name: str = "mikasa-collect",
     ) -> None:
@@ -110,14 +119,21 @@ class ProcessPool:
         self.results = ctx.Queue()
         self.job_attr = job_attr
         self.in_flight: set[Any] = set()
+        self.slots = workers * envs_per_worker
         self.processes = [
             ctx.Process(
                 target=_worker_main,
-                args=(wid, runner_args, self.jobs, self.results, factory),
+                args=(
+                    list(range(w * envs_per_worker, (w + 1) * envs_per_worker)),
+                    runner_args,
+                    self.jobs,
+                    self.results,
+                    factory,
+                ),
                 daemon=True,
-                name=f"{name}-{wid}",
+                name=f"{name}-{w}",
             )
-            for wid in range(workers)
+            for w in range(workers)
         ]
         for p in self.processes:
             p.start()
@@ -151,7 +167,7 @@ class ProcessPool:
 
         graceful = graceful and not self.in_flight
         if graceful:
-            for _ in self.processes:
+            for _ in range(self.slots):
                 self.jobs.put(None)
         # Graceful: nothing is left to write (every attempt came back), so a worker slow
         # to tear down its simulator is not worth waiting for long. Error / interrupt:
