@@ -21,9 +21,9 @@ Time. A worker rebuilds its scene for every attempt (``reset(options={"reconfigu
 True})``: the files must not depend on which worker ran which seed), so an episode costs a
 fixed part plus a part per frame. Runs where every worker played at least
 `LONG_RUN_EPISODES_PER_WORKER` episodes time that steady state; from two or more of them
-(different episode lengths) the script fits ``seconds per episode per worker = a + b x
+(different episode lengths) the script fits ``seconds per episode per env = a + b x
 frames`` and projects every task as ``start-up + episodes x (a + b x frames per episode) /
-(workers x yield)``, where ``yield`` is the family's share of successful attempts and
+(envs x yield)`` (envs: worker processes x envs per process), where ``yield`` is the family's share of successful attempts and
 start-up (the workers' imports and first scene, paid once per task) is the median over the
 runs. Short runs are dominated by start-up and under-state the steady rate several times
 (on the GPU machine 32 episodes on 16 workers ran at 1/2-1/6 of the rate 256 did); without
@@ -56,7 +56,8 @@ SIM_PYTHON = REPO / ".venv" / "bin" / "python"
 Python has the packages)."""
 
 LONG_RUN_EPISODES_PER_WORKER = 8
-"""A run times the steady state when each of its workers played this many episodes."""
+"""A run times the steady state when each of its worker processes played this many
+episodes (with several envs per process, they share them)."""
 
 
 def collect_child(env_id: str, episodes: int, workers: int, envs: int, out: str) -> None:
@@ -159,7 +160,7 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
 
 
 def _seconds_per_episode(row: dict) -> float:
-    """A worker's wall seconds per kept episode in the run's steady state."""
+    """An env's wall seconds per kept episode in the run's steady state."""
     return _runners(row) * 60.0 / row["steady_episodes_per_min"]
 
 
@@ -169,10 +170,10 @@ def _runners(row: dict) -> int:
 
 
 def fit_episode_cost(rows: list[dict]) -> dict | None:
-    """Least-squares ``seconds per kept episode per worker = a + b x frames per episode``
+    """Least-squares ``seconds per kept episode per env = a + b x frames per episode``
     over the long runs (`LONG_RUN_EPISODES_PER_WORKER`); None without two long runs of
     different episode lengths."""
-    long_rows = [r for r in rows if r["episodes"] >= LONG_RUN_EPISODES_PER_WORKER * _runners(r)]
+    long_rows = [r for r in rows if r["episodes"] >= LONG_RUN_EPISODES_PER_WORKER * r["workers"]]
     x = np.array([r["frames"] / r["episodes"] for r in long_rows])
     if len(long_rows) < 2 or np.ptp(x) == 0:
         return None
@@ -190,13 +191,16 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
     """The whole published plan (``episodes_per_task`` successful episodes of every canonical
     task) projected from the measured families, with the most envs collecting at once measured
     (the module docstring says how)."""
+    # Frames per episode, yield and bytes from every run (the files do not depend on how
+    # many envs collect them); time from the runs with the most envs at once.
+    rows = [r for r in rows if r["episodes"]]
     most = max(_runners(r) for r in rows)
-    rows = [r for r in rows if _runners(r) == most and r["episodes"]]
+    timed = [r for r in rows if _runners(r) == most]
     by_family: dict[str, list[dict]] = {}
     for r in rows:
         by_family.setdefault(r["family"], []).append(r)
-    model = fit_episode_cost(rows)
-    startup = statistics.median(r["startup_s"] for r in rows if r["startup_s"] is not None)
+    model = fit_episode_cost(timed)
+    startup = statistics.median(r["startup_s"] for r in timed if r["startup_s"] is not None)
     frames = seconds = size = 0.0
     parts = {"startup": 0.0, "episodes": 0.0, "frames": 0.0}  # the model's three terms, seconds
     covered, uncovered = 0, {}
@@ -204,7 +208,8 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
         if not canonical:
             continue
         runs = by_family.get(family)
-        if not runs:
+        timed_runs = [r for r in runs or [] if _runners(r) == most]
+        if not runs or not (model or timed_runs):
             uncovered.setdefault(family, []).append(env_id)
             continue
         run_frames = sum(r["frames"] for r in runs)
@@ -218,7 +223,7 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
             parts["episodes"] += episodes_per_task * attempts * model["episode_s"] / most
             parts["frames"] += episodes_per_task * attempts * model["frame_s"] * per_episode / most
         else:
-            best = max(runs, key=lambda r: r["episodes"])
+            best = max(timed_runs, key=lambda r: r["episodes"])
             seconds += task_frames / (
                 best["steady_episodes_per_min"] / 60 * best["frames"] / best["episodes"]
             )
@@ -239,7 +244,7 @@ def project_plan(rows: list[dict], tasks: list, episodes_per_task: int) -> dict:
         "disk_gb": round(size / 1e9, 1),
     }
     how = (
-        f"a + b x frames per episode per worker, a = {model['episode_s']:.3f} s, b = "
+        f"a + b x frames per episode per env, a = {model['episode_s']:.3f} s, b = "
         f"{1000 * model['frame_s']:.2f} ms (fit on {len(model['runs'])} long runs, worst "
         f"{model['max_rel_error']:.0%} off), start-up {startup:.1f} s per task; hours of frames "
         f"{parts['frames'] / 3600:.2f}, of per-episode cost {parts['episodes'] / 3600:.2f}, of "
