@@ -2,16 +2,18 @@
 # The lerobot side of the lent GPU machine (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
-#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/lerobot_wheels/ (~56 MB)
+#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~59 MB)
 #   source baselines/lerobot/gpu_bundle.sh env        # there, in each call's command
+#   bash baselines/lerobot/gpu_bundle.sh check        # there, after env: what imports, what is missing
 #
 # "download" fetches lerobot 0.4.4 (--no-deps) and what its dataset, training and the two
-# policies' code import beyond the image (the list below), for cp312 manylinux. The folder
-# is git-ignored (.carry/); carried alone with the tracked tree it stays under the 64 MiB a
-# call may carry, so it travels in a call of its own, without .gpu.
+# policies' code import beyond the image (the list below), for cp312 manylinux, into
+# .carry/lerobot_wheels/ (~19 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
+# with the tracked tree each fits the 64 MiB one call may carry, so each travels in a call
+# of its own (in either order), without .gpu.
 #
 # "env" (sourced, on the GPU machine) installs carried wheels into /tmp/lrsite when they
-# came with this call (a warm machine keeps /tmp between calls: later calls need not carry
+# came with this call, and stops with a message until both halves are there (a warm machine keeps /tmp between calls: later calls need not carry
 # them), gives torchcodec an FFmpeg, and exports the variables every call needs: the
 # simulator's site from an earlier `.gpu/run.sh` call (/tmp/site, /tmp/site2; the mesh cache
 # and IPython stub copied to /tmp/mikasa-gpu by that call, see README.md), Vulkan, and
@@ -27,6 +29,7 @@
 _here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 _root=$(cd "$_here/../.." && pwd)
 _wheels=$_root/.carry/lerobot_wheels
+_av=$_root/.carry/lerobot_av  # PyAV alone (40 MB): with the rest, one carry would pass 64 MiB
 
 LEROBOT_GPU_WHEELS=(
   "lerobot==0.4.4" "draccus==0.10.0" "mergedeep==1.3.4" "pyyaml-include==1.4.1" "toml==0.10.2"
@@ -38,6 +41,11 @@ LEROBOT_GPU_WHEELS=(
   "deepdiff==8.6.2" "orderly-set==5.5.0" "jsonlines==4.0.0" "termcolor==3.3.0" "pyserial==3.5"
   "aiohttp==3.14.5" "aiohappyeyeballs==2.7.1" "aiosignal==1.4.0" "frozenlist==1.8.0"
   "multidict==7.2.1" "propcache==0.5.4" "yarl==1.25.1" "attrs==26.1.0"
+  # imported on the way (checked in the CPU machine's .venv-datasets): datasets' file utils
+  # (httpx), lerobot.utils.io_utils (imageio), the GR00T policy module that the policy
+  # factory imports (dm-tree and its needs)
+  "httpx==0.28.1" "httpcore==1.0.9" "h11==0.16.0" "anyio==4.16.0" "imageio==2.38.1"
+  "dm-tree==0.1.10" "absl-py==2.5.1" "wrapt==2.5.2"
 )
 
 _download() {
@@ -46,19 +54,22 @@ _download() {
     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
     -d "$_wheels.partial" "${LEROBOT_GPU_WHEELS[@]}" 2>&1 | grep -v "^WARNING: Location" || true
   [ "$(ls "$_wheels.partial" | wc -l)" -eq "${#LEROBOT_GPU_WHEELS[@]}" ] || { echo "download incomplete"; return 1; }
-  rm -rf "$_wheels" && mv "$_wheels.partial" "$_wheels"
+  rm -rf "$_wheels" "$_av" && mkdir -p "$_av" && mv "$_wheels.partial"/av-*.whl "$_av"/ \
+    && mv "$_wheels.partial" "$_wheels"
   grep -qx '/.carry/' "$_root/.git/info/exclude" 2>/dev/null || grep -q '^\.carry' "$_root/.gitignore" \
     || echo "note: .carry/ is not ignored by git here"
-  du -sh "$_wheels"
+  du -sh "$_wheels" "$_av"
 }
 
 _env() {
-  if [ -d "$_wheels" ]; then
-    rm -rf /tmp/lrsite
-    python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/lrsite "$_wheels"/*.whl \
-      >/tmp/lrsite-install.log 2>&1 || { echo "lerobot wheel install failed: /tmp/lrsite-install.log"; return 1; }
-  fi
-  [ -d /tmp/lrsite/av.libs ] || { echo "no /tmp/lrsite: carry .carry/lerobot_wheels once"; return 1; }
+  local d
+  for d in "$_wheels" "$_av"; do
+    [ -d "$d" ] || continue
+    python3 -m pip install -q --upgrade --no-index --no-deps --no-compile --target /tmp/lrsite "$d"/*.whl \
+      >/tmp/lrsite-install.log 2>&1 || { echo "wheel install failed: /tmp/lrsite-install.log"; return 1; }
+  done
+  [ -d /tmp/lrsite/lerobot ] || { echo "no lerobot in /tmp/lrsite: carry .carry/lerobot_wheels once"; return 1; }
+  [ -d /tmp/lrsite/av.libs ] || { echo "no PyAV in /tmp/lrsite: carry .carry/lerobot_av once"; return 1; }
   [ -d /tmp/site2 ] && [ -d /tmp/mikasa-gpu/cache ] || { echo "no simulator site: run the .gpu/run.sh call first (README.md)"; return 1; }
   rm -rf /tmp/avlink && mkdir -p /tmp/avlink
   local f lib
@@ -74,8 +85,45 @@ _env() {
   export MIKASA_CACHE_DIR=/tmp/mikasa-gpu/cache PYTHONUNBUFFERED=1
 }
 
+# The modules training and evaluation import, each tried on its own so that one call names
+# every missing package (a module missing from the image: add its wheel to the list above).
+_check() {
+  "${PYTHON:-python3}" - <<'PY'
+import importlib
+import os
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+try:  # the project's torchvision guard (a no-op where torchvision matches torch)
+    from mikasa_datasets.lerobot import ensure_torchvision_importable
+
+    ensure_torchvision_importable()
+except Exception as exc:  # noqa: BLE001
+    print(f"FAILED  mikasa_datasets.lerobot.ensure_torchvision_importable: {exc}")
+
+modules = [
+    "torchcodec.decoders", "lerobot.datasets.lerobot_dataset", "lerobot.datasets.video_utils",
+    "lerobot.policies.act.modeling_act", "lerobot.policies.diffusion.modeling_diffusion",
+    "lerobot.policies.factory", "lerobot.scripts.lerobot_train", "lerobot.scripts.lerobot_eval",
+    "mikasa_datasets.lerobot", "mikasa_bench.lerobot_policy", "mikasa_bench.lerobot_env",
+]
+missing = {}
+for name in modules:
+    try:
+        importlib.import_module(name)
+        print(f"ok      {name}")
+    except Exception as exc:  # noqa: BLE001  (report every failure, go on)
+        print(f"FAILED  {name}: {type(exc).__name__}: {exc}")
+        if isinstance(exc, ModuleNotFoundError) and exc.name:
+            missing.setdefault(exc.name.split(".")[0], name)
+import torchcodec._core as core
+print("ffmpeg:", core.get_ffmpeg_library_versions().get("ffmpeg_version"))
+print("missing top-level modules:", ", ".join(missing) or "none")
+PY
+}
+
 case "${1:-}" in
   download) _download ;;
   env) _env ;;
-  *) echo "usage: bash $0 download | source $0 env"; false ;;
+  check) _check ;;
+  *) echo "usage: bash $0 download | source $0 env | bash $0 check (after env)"; false ;;
 esac
