@@ -210,10 +210,16 @@ def test_envs_in_threads_write_what_one_worker_writes(reference, tmp_path):
     assert tree(tmp_path / "data") == tree(reference / "data")
 
 
-def test_several_tasks_in_one_command_write_what_each_alone_writes(reference, tmp_path, capsys):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_several_tasks_in_one_command_write_what_each_alone_writes(
+    reference, tmp_path, capsys, workers
+):
+    """Tasks one after another (with 2 workers: on one pool of processes that switch
+    tasks) write what each task's collection alone writes."""
     other, other_name = "FindImposterColor3-VLA-v0", "find_imposter_color_3_vla_v0"
     with chdir(tmp_path / "both"):
         argv = ["--env-id", ENV_ID, "--env-id", other, "--num-episodes", str(N), "--out", "data"]
+        argv += ["--workers", str(workers)]
         assert main([*argv, "--no-progress"]) == 0
     assert "2/2 task(s) complete: 6 new episode(s)" in capsys.readouterr().out
     run(tmp_path / "alone", other)
@@ -267,13 +273,14 @@ class _LifoPool:
 
     max_in_flight = 0
 
-    def __init__(self, runner_args, workers):
+    def __init__(self, runner_args, workers, envs_per_worker=1):
         from mikasa_oracles import collect as collect_module
 
         self.runner = collect_module._AttemptRunner(*runner_args)
+        self.slots = workers * envs_per_worker
         self.submitted: list[int] = []
 
-    def submit(self, seed):
+    def submit(self, seed, runner_args=None):
         self.submitted.append(seed)
         _LifoPool.max_in_flight = max(_LifoPool.max_in_flight, len(self.submitted))
 

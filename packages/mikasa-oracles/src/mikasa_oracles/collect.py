@@ -440,6 +440,17 @@ def _existing_episodes(directory: Path, env_id: str, start_seed: int) -> list[An
     return existing
 
 
+def open_pool(
+    runners: int, envs_per_worker: int = 1, runner_args: tuple[Any, ...] | None = None
+) -> InlinePool | ProcessPool:
+    """A local pool of ``runners`` attempt runners, ``envs_per_worker`` to a process (in this
+    process when ``runners`` is 1). Its runners are built for each job's task, so
+    :func:`collect` can share it across tasks (``runner_args``: the first task's)."""
+    if runners == 1:
+        return InlinePool(runner_args)
+    return ProcessPool(runner_args, -(-runners // envs_per_worker), envs_per_worker=envs_per_worker)
+
+
 def collect(
     env_id: str,
     num_episodes: int,
@@ -454,6 +465,7 @@ def collect(
     log_attempts: bool = False,
     executor: str = "local",
     ray_address: str | None = None,
+    pool: Any = None,
 ) -> CollectionSummary:
     """Collect ``num_episodes`` successful oracle episodes of ``env_id`` under ``out``.
 
@@ -462,7 +474,10 @@ def collect(
     runs ``workers`` local processes (in-process for 1), "ray" as many Ray actors
     (``ray_address``, ``$RAY_ADDRESS`` or a local Ray instance); the files are the same.
     ``envs_per_worker`` (local processes only) runs that many envs per process, in threads
-    that render together (on a GPU: fewer render passes); the files are the same. Raises
+    that render together (on a GPU: fewer render passes); the files are the same. ``pool``
+    (from :func:`open_pool`) runs the attempts instead of a pool of this call's own, and is
+    left open for the next task (the caller closes it, and replaces it after an exception:
+    attempts may still be in flight). Raises
     :class:`CollectError` for bad input and :class:`CollectionFailed` if the budget runs
     out or a worker crashes; saved episodes stay valid in both cases.
     """
@@ -532,18 +547,15 @@ def collect(
             raise CollectError(f"no seeds left: the next seed {first_seed} exceeds {MAX_SEED}")
         staging.mkdir(parents=True, exist_ok=True)
         runner_args = (env_id, str(staging), min_episode_length, spec.language_instruction)
-        # Runners in all (processes x envs each), never more than the missing episodes.
-        n_runners = min(workers * envs_per_worker, missing)
-        if executor == "ray":
-            pool: Any = RayPool(runner_args, n_runners, address=ray_address)
-        elif n_runners == 1:
-            pool = InlinePool(runner_args)
-        else:
-            per_process = min(envs_per_worker, n_runners)
-            pool = ProcessPool(
-                runner_args, -(-n_runners // per_process), envs_per_worker=per_process
-            )
-            n_runners = pool.slots
+        own_pool = pool is None
+        if own_pool:
+            # Runners in all (processes x envs each), never more than the missing episodes.
+            n_runners = min(workers * envs_per_worker, missing)
+            if executor == "ray":
+                pool = RayPool(runner_args, n_runners, address=ray_address)
+            else:
+                pool = open_pool(n_runners, min(envs_per_worker, n_runners), runner_args)
+        n_runners = pool.slots
         log_attempts = (
             log_attempts or os.environ.get("MIKASA_LOG_EPISODE_LENGTHS", "").lower() in _TRUTHY
         )
@@ -572,7 +584,7 @@ def collect(
                     and next_seed <= MAX_SEED
                     and len(committed) + len(in_flight) + staged_ok < num_episodes
                 ):
-                    pool.submit(next_seed)
+                    pool.submit(next_seed, runner_args)
                     in_flight.add(next_seed)
                     next_seed += 1
                     summary.attempts += 1
@@ -614,7 +626,8 @@ def collect(
             ok = True
         finally:
             bar.close()
-            pool.close(graceful=ok)
+            if own_pool:
+                pool.close(graceful=ok)
             _clean_staging(staging)
             summary.wall_s = time.perf_counter() - t0
             if summary.attempts:

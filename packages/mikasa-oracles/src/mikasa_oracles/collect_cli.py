@@ -31,6 +31,7 @@ from mikasa_oracles.collect import (
     CollectionFailed,
     CollectionSummary,
     collect,
+    open_pool,
     resolve_task,
 )
 
@@ -171,40 +172,56 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     failed: list[str] = []
     summaries: list[CollectionSummary] = []
-    for k, env_id in enumerate(env_ids, 1):
-        if len(env_ids) > 1:
-            print(f"[{k}/{len(env_ids)}] {env_id}", file=sys.stderr, flush=True)
-        try:
-            summary = collect(
-                env_id,
-                args.num_episodes,
-                args.out,
-                workers=args.workers,
-                envs_per_worker=args.envs_per_worker,
-                start_seed=args.start_seed,
-                max_attempts=args.max_attempts,
-                min_episode_length=args.min_episode_length,
-                progress=not args.no_progress,
-                log_attempts=args.log_attempts,
-                executor=args.executor,
-                ray_address=args.ray_address,
-            )
-        except CollectError as exc:
-            print(f"mikasa-collect: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        except CollectionFailed as exc:
-            print(f"mikasa-collect: collection failed: {exc}", file=sys.stderr)
-            failed.append(env_id)
-            continue
-        except KeyboardInterrupt:
-            print(
-                "mikasa-collect: interrupted; the episodes saved so far are kept — rerun the same "
-                "command to continue",
-                file=sys.stderr,
-            )
-            return EXIT_INTERRUPTED
-        summaries.append(summary)
-        print(summary.format(), flush=True)
+    # Several tasks on local workers share one pool: its processes start once, not per task.
+    runners = args.workers * args.envs_per_worker
+    share = len(env_ids) > 1 and args.executor == "local" and runners > 1
+
+    def new_pool() -> Any:
+        return open_pool(runners, args.envs_per_worker) if share else None
+
+    pool = new_pool()
+    try:
+        for k, env_id in enumerate(env_ids, 1):
+            if len(env_ids) > 1:
+                print(f"[{k}/{len(env_ids)}] {env_id}", file=sys.stderr, flush=True)
+            try:
+                summary = collect(
+                    env_id,
+                    args.num_episodes,
+                    args.out,
+                    workers=args.workers,
+                    envs_per_worker=args.envs_per_worker,
+                    start_seed=args.start_seed,
+                    max_attempts=args.max_attempts,
+                    min_episode_length=args.min_episode_length,
+                    progress=not args.no_progress,
+                    log_attempts=args.log_attempts,
+                    executor=args.executor,
+                    ray_address=args.ray_address,
+                    pool=pool,
+                )
+            except CollectError as exc:
+                print(f"mikasa-collect: error: {exc}", file=sys.stderr)
+                return EXIT_USAGE
+            except CollectionFailed as exc:
+                print(f"mikasa-collect: collection failed: {exc}", file=sys.stderr)
+                failed.append(env_id)
+                if pool is not None:  # a worker may have died or left attempts in flight
+                    pool.close(graceful=False)
+                    pool = new_pool()
+                continue
+            except KeyboardInterrupt:
+                print(
+                    "mikasa-collect: interrupted; the episodes saved so far are kept — rerun the "
+                    "same command to continue",
+                    file=sys.stderr,
+                )
+                return EXIT_INTERRUPTED
+            summaries.append(summary)
+            print(summary.format(), flush=True)
+    finally:
+        if pool is not None:
+            pool.close()
     if len(env_ids) > 1:
         new = sum(s.new_episodes for s in summaries)
         frames = sum(s.frames for s in summaries)

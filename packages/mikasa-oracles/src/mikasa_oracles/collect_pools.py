@@ -1,7 +1,10 @@
 """The executors of ``mikasa-collect``: where the attempts (one seed each) run.
 
 Every pool has the same small interface: ``submit(seed)``, ``get()`` (the next finished
-attempt, in completion order) and ``close()``. The collector keeps at most as many attempts
+attempt, in completion order) and ``close()``. The local pools also take
+``submit(seed, runner_args)``: a worker whose runner was built for other arguments (another
+task) closes it and builds one for these, so one pool serves the tasks of a
+``--split``/repeated ``--env-id`` run one after another without restarting its processes. The collector keeps at most as many attempts
 in flight as the pool has workers and commits them in seed order, so the files do not depend
 on the pool, its size or the timing.
 
@@ -47,21 +50,47 @@ class CollectionFailed(RuntimeError):
 
 
 
+class _TaskRunner:
+    """A worker's runner across tasks: runs ``(runner_args, job)`` pairs on
+    ``factory(*runner_args)``, rebuilt when the arguments change (None: built on the first
+    job)."""
+
+    def __init__(self, factory: Callable[..., Any], runner_args: tuple[Any, ...] | None) -> None:
+        self.factory = factory
+        self.args = runner_args
+        self.runner = None if runner_args is None else factory(*runner_args)
+
+    def run(self, job: tuple[tuple[Any, ...], Any]) -> Any:
+        args, inner = job
+        if self.runner is None or args != self.args:
+            self.close()
+            self.runner, self.args = self.factory(*args), args
+        return self.runner.run(inner)
+
+    def close(self) -> None:
+        if self.runner is not None:
+            self.runner.close()
+            self.runner = None
+
+
 class InlinePool:
     """``--workers 1``: attempts run in this process, one at a time.
 
     ``factory(*runner_args)`` builds the runner (default :class:`_AttemptRunner`; the RL
-    collector, ``mikasa_robo_rl.collect``, passes its own).
+    collector, ``mikasa_robo_rl.collect``, passes its own; None: built on the first job).
     """
 
+    slots = 1
+
     def __init__(
-        self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None
+        self, runner_args: tuple[Any, ...] | None, factory: Callable[..., Any] | None = None
     ) -> None:
-        self.runner = _runner_factory(factory)(*runner_args)
+        self.runner_args = runner_args
+        self.runner = _TaskRunner(_runner_factory(factory), runner_args)
         self.queue: list[Any] = []
 
-    def submit(self, seed: int) -> None:
-        self.queue.append(seed)
+    def submit(self, seed: int, runner_args: tuple[Any, ...] | None = None) -> None:
+        self.queue.append((runner_args or self.runner_args, seed))
 
     def get(self) -> Any:
         return self.runner.run(self.queue.pop(0))
@@ -70,11 +99,13 @@ class InlinePool:
         self.runner.close()
 
 
-def _start_runner(runner_args: tuple[Any, ...], factory: Callable[..., Any] | None = None) -> Any:
+def _start_runner(
+    runner_args: tuple[Any, ...] | None, factory: Callable[..., Any] | None = None
+) -> _TaskRunner:
     from mikasa_envs.workers import quiet_worker  # imported lazily: mikasa_envs loads ManiSkill
 
     quiet_worker()
-    return _runner_factory(factory)(*runner_args)
+    return _TaskRunner(_runner_factory(factory), runner_args)
 
 
 def _worker_main(
@@ -98,7 +129,7 @@ class ProcessPool:
 
     Each process runs ``envs_per_worker`` runners built by ``factory(*runner_args)``
     (default :class:`_AttemptRunner`; ``factory`` must be importable by name, e.g. a
-    module-level class), in as many threads when there are several (their envs then render
+    module-level class; ``runner_args`` None: each job names its own), in as many threads when there are several (their envs then render
     in shared passes; a runner's results must not depend on the other threads: the
     collectors' do not, each attempt building its scene afresh). `slots` runners in all.
     A job's result names its job in the attribute ``job_attr`` (an attempt's ``seed``).
@@ -106,7 +137,7 @@ class ProcessPool:
 
     def __init__(
         self,
-        runner_args: tuple[Any, ...],
+        runner_args: tuple[Any, ...] | None,
         workers: int,
         factory: Callable[..., Any] | None = None,
         *,
@@ -115,6 +146,7 @@ class ProcessPool:
         name: str = "mikasa-collect",
     ) -> None:
         ctx = mp.get_context("spawn")
+        self.runner_args = runner_args
         self.jobs = ctx.Queue()
         self.results = ctx.Queue()
         self.job_attr = job_attr
@@ -138,9 +170,9 @@ class ProcessPool:
         for p in self.processes:
             p.start()
 
-    def submit(self, seed: Any) -> None:
+    def submit(self, seed: Any, runner_args: tuple[Any, ...] | None = None) -> None:
         self.in_flight.add(seed)
-        self.jobs.put(seed)
+        self.jobs.put((runner_args or self.runner_args, seed))
 
     def get(self) -> Any:
         while True:
@@ -188,7 +220,8 @@ class _RayAttemptWorker:
 
     def __init__(self, runner_args: tuple[Any, ...], factory: Callable[..., Any] | None) -> None:
         self.staging = tempfile.mkdtemp(prefix="mikasa-collect-")
-        self.runner = _start_runner((runner_args[0], self.staging, *runner_args[2:]), factory)
+        self.args = (runner_args[0], self.staging, *runner_args[2:])
+        self.runner = _start_runner(self.args, factory)
 
     def ready(self) -> str:
         """The node's host name, once the actor is up."""
@@ -198,7 +231,7 @@ class _RayAttemptWorker:
 
     def run(self, seed: int) -> tuple[Any, bytes | None]:
         """One attempt, and the staged episode file's bytes (the file is removed here)."""
-        result = self.runner.run(seed)
+        result = self.runner.run((self.args, seed))
         if result.staged is None:
             return result, None
         staged = Path(result.staged)
@@ -248,6 +281,7 @@ class RayPool:
         )
 
         ray = self.ray = import_ray()
+        self.runner_args = runner_args
         self.staging = Path(runner_args[1])
         self.started = init_ray(ray, address, workers)
         gpus = float(ray.cluster_resources().get("GPU", 0.0))
@@ -260,6 +294,7 @@ class RayPool:
         except RayStartError as exc:
             self.close()
             raise CollectionFailed(str(exc)) from None
+        self.slots = workers
         self.idle = list(self.actors)
         self.waiting: list[int] = []
         self.running: dict[Any, tuple[Any, int]] = {}
@@ -269,7 +304,11 @@ class RayPool:
             actor, seed = self.idle.pop(), self.waiting.pop(0)
             self.running[actor.run.remote(seed)] = (actor, seed)
 
-    def submit(self, seed: int) -> None:
+    def submit(self, seed: int, runner_args: tuple[Any, ...] | None = None) -> None:
+        """Queue ``seed``. A Ray pool serves the one task it was built for (its actors stage
+        on their own nodes): ``runner_args``, if given, must be that task's."""
+        if runner_args is not None and runner_args != self.runner_args:
+            raise ValueError("a RayPool runs the task it was built for only")
         self.waiting.append(seed)
         self._dispatch()
 
