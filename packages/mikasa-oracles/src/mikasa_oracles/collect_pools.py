@@ -1,12 +1,12 @@
 """The executors of ``mikasa-collect``: where the attempts (one seed each) run.
 
 Every pool has the same small interface: ``submit(seed)``, ``get()`` (the next finished
-attempt, in completion order) and ``close()``. The local pools also take
-``submit(seed, runner_args)``: a worker whose runner was built for other arguments (another
-task) closes it and builds one for these, so one pool serves the tasks of a
-``--split``/repeated ``--env-id`` run one after another without restarting its processes. The collector keeps at most as many attempts
-in flight as the pool has workers and commits them in seed order, so the files do not depend
-on the pool, its size or the timing.
+attempt, in completion order), ``close()`` and ``slots`` (runners in all). The collector keeps
+at most ``slots`` attempts in flight and commits them in seed order, so the files do not
+depend on the pool, its size or the timing. The local pools also take
+``submit(seed, runner_args)``: a runner built for other arguments (another task) is closed
+and one for these is built, so one pool serves the tasks of a ``--split`` or repeated
+``--env-id`` run one after another without restarting its processes.
 
 * :class:`InlinePool` — ``--workers 1``: in this process.
 * :class:`ProcessPool` — ``--workers W``: W spawn-started local processes, each running
@@ -129,10 +129,11 @@ class ProcessPool:
 
     Each process runs ``envs_per_worker`` runners built by ``factory(*runner_args)``
     (default :class:`_AttemptRunner`; ``factory`` must be importable by name, e.g. a
-    module-level class; ``runner_args`` None: each job names its own), in as many threads when there are several (their envs then render
-    in shared passes; a runner's results must not depend on the other threads: the
-    collectors' do not, each attempt building its scene afresh). `slots` runners in all.
-    A job's result names its job in the attribute ``job_attr`` (an attempt's ``seed``).
+    module-level class; ``runner_args`` None: each job names its own), in as many threads
+    when there are several (their envs then render in shared passes; a runner's results
+    must not depend on the other threads: the collectors' do not, each attempt building its
+    scene afresh). ``slots`` runners in all. A job's result names its job in the attribute
+    ``job_attr`` (an attempt's ``seed``).
     """
 
     def __init__(
