@@ -60,24 +60,46 @@ LONG_RUN_EPISODES_PER_WORKER = 8
 episodes (with several envs per process, they share them)."""
 
 
-def collect_child(env_id: str, episodes: int, workers: int, envs: int, out: str) -> None:
-    """(In the simulator's environment) collect, print the summary as one JSON line."""
-    from mikasa_oracles.collect import collect
+def collect_child(
+    env_ids: list[str], episodes: int, workers: int, envs: int, out: str, shared: bool
+) -> None:
+    """(In the simulator's environment) collect each task in turn, print each summary as one
+    JSON line; with ``shared`` on one pool of workers, as ``mikasa-collect`` runs several
+    tasks, else on a pool per task."""
+    from mikasa_datasets.npz import task_dir
+    from mikasa_oracles.collect import collect, open_pool
 
-    s = collect(env_id, episodes, out, workers=workers, envs_per_worker=envs, progress=False)
-    row = {
-        "env_id": env_id,
-        "workers": workers,
-        "envs_per_worker": envs,
-        "episodes": s.new_episodes,
-        "frames": s.frames,
-        "wall_s": round(s.wall_s, 2),
-        "episodes_per_min": round(s.episodes_per_min, 1),
-        "startup_s": None if s.startup_s is None else round(s.startup_s, 2),
-        "steady_episodes_per_min": round(s.steady_episodes_per_min, 1),
-        "success_rate": round(s.success_rate, 3),
-    }
-    print("COLLECT " + json.dumps(row), flush=True)
+    pool = open_pool(workers * envs, envs) if shared and workers * envs > 1 else None
+    try:
+        for env_id in env_ids:
+            s = collect(
+                env_id,
+                episodes,
+                out,
+                workers=workers,
+                envs_per_worker=envs,
+                progress=False,
+                pool=pool,
+            )
+            files = [f for f in task_dir(Path(out), env_id).rglob("*") if f.is_file()]
+            row = {
+                "env_id": env_id,
+                "workers": workers,
+                "envs_per_worker": envs,
+                "shared_pool": shared,
+                "episodes": s.new_episodes,
+                "frames": s.frames,
+                "wall_s": round(s.wall_s, 2),
+                "episodes_per_min": round(s.episodes_per_min, 1),
+                "startup_s": None if s.startup_s is None else round(s.startup_s, 2),
+                "steady_episodes_per_min": round(s.steady_episodes_per_min, 1),
+                "success_rate": round(s.success_rate, 3),
+                "bytes": sum(f.stat().st_size for f in files),
+            }
+            print("COLLECT " + json.dumps(row), flush=True)
+    finally:
+        if pool is not None:
+            pool.close()
 
 
 def manifest_rows(sim_python: Path) -> list[tuple[str, int, str, bool, bool]]:
@@ -122,38 +144,49 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
     print(
         f"collection: {args.episodes} episodes per run; families without envs yet: {len(missing)}"
     )
+    # One child per run; with --shared-pool one child per worker count runs every family
+    # on one pool, as mikasa-collect runs several tasks.
+    runs = [([f], w) for f in reps for w in workers]
+    if args.shared_pool:
+        runs = [(list(reps), w) for w in workers]
+    horizon_of = {f: h for f, (h, _) in reps.items()}
+    family_of = {e: f for f, (_, e) in reps.items()}
     rows = []
-    for family, (horizon, env_id) in reps.items():
-        for w in workers:
-            out = work / f"collect_{family}_{w}"
-            proc = subprocess.run(
-                [
-                    str(args.sim_python),
-                    __file__,
-                    "--_child",
-                    env_id,
-                    str(args.episodes),
-                    str(w),
-                    str(args.envs_per_worker),
-                    str(out),
-                ],
-                capture_output=True,
-                text=True,
-            )
-            lines = [x for x in proc.stdout.splitlines() if x.startswith("COLLECT ")]
-            if proc.returncode != 0 or not lines:
-                raise RuntimeError(f"collection of {env_id} failed:\n{proc.stdout}\n{proc.stderr}")
-            row = {"path": "collect", "family": family, **json.loads(lines[-1][8:])}
-            row["horizon"] = horizon
-            row["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    for k, (families, w) in enumerate(runs):
+        out, log = work / f"collect_{k}", work / f"collect_{k}.stderr"
+        proc = subprocess.Popen(
+            [
+                str(args.sim_python),
+                __file__,
+                "--_child",
+                ",".join(reps[f][1] for f in families),
+                str(args.episodes),
+                str(w),
+                str(args.envs_per_worker),
+                str(out),
+                str(int(args.shared_pool)),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=log.open("w"),  # a file: a full stderr pipe would stall the child
+            text=True,
+        )
+        for line in proc.stdout:
+            if not line.startswith("COLLECT "):
+                continue
+            row = {"path": "collect", **json.loads(line[8:])}
+            row["family"] = family = family_of[row["env_id"]]
+            row["horizon"] = horizon_of[family]
             print(
-                f"collect {family:<30} {env_id:<34} {w}x{args.envs_per_worker} env(s) {row['episodes_per_min']:>6.1f} episodes/min, "
-                f"{row['steady_episodes_per_min']:>6.1f} after start-up ({row['episodes']} ep, {row['frames']} frames, "
-                f"{row['wall_s']:.1f} s, start-up {row['startup_s']} s, success {row['success_rate']:.0%})",
+                f"collect {family:<30} {row['env_id']:<34} {w}x{args.envs_per_worker} env(s) "
+                f"{row['episodes_per_min']:>6.1f} episodes/min, {row['steady_episodes_per_min']:>6.1f} "
+                f"after start-up ({row['episodes']} ep, {row['frames']} frames, {row['wall_s']:.1f} s, "
+                f"start-up {row['startup_s']} s, success {row['success_rate']:.0%})",
                 flush=True,
             )
             rows.append(row)
-            shutil.rmtree(out, ignore_errors=True)
+        if proc.wait() != 0:
+            raise RuntimeError(f"collection run {k} failed:\n{log.read_text()[-4000:]}")
+        shutil.rmtree(out, ignore_errors=True)
     for family in missing:
         print(f"collect {family:<30} (no env yet)")
     return rows
@@ -304,11 +337,19 @@ def main(argv: list[str] | None = None) -> int:
         help="the simulator's Python (default: %(default)s)",
     )
     parser.add_argument("--json", type=Path, help="also write the rows (and the plan) as JSON here")
-    parser.add_argument("--_child", nargs=5, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--shared-pool",
+        action="store_true",
+        help="collect the families one after another on one pool of workers, as mikasa-collect "
+        "runs several tasks (start-up: the first task's includes the processes' start)",
+    )
+    parser.add_argument("--_child", nargs=6, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args._child:
-        env_id, episodes, workers, envs, out = args._child
-        collect_child(env_id, int(episodes), int(workers), int(envs), out)
+        env_ids, episodes, workers, envs, out, shared = args._child
+        collect_child(
+            env_ids.split(","), int(episodes), int(workers), int(envs), out, shared == "1"
+        )
         return 0
     if not Path(args.sim_python).is_file():
         raise SystemExit(
