@@ -403,6 +403,27 @@ else:
             lr.convert_npz_to_lerobot(task, out, workers=2)
         assert list(out.iterdir()) == []  # staging and the writers' parts removed
 
+    def test_numpy_2_4_is_refused_before_writing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        """lerobot 0.4's save_episode fails on numpy >= 2.4 (float() of shape-(1,) arrays,
+        seen on the GPU machine's image): the converter says so and writes nothing."""
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10])
+        monkeypatch.setattr(lerobot_write.np, "__version__", "2.4.6")
+        with pytest.raises(RuntimeError, match=r"numpy 2\.4\.6.*numpy<2\.4"):
+            lr.convert_npz_to_lerobot(task, tmp_path / "data_lerobot")
+        assert not (tmp_path / "data_lerobot").exists() or not any((tmp_path / "data_lerobot").iterdir())
+
+    def test_writer_process_error_carries_its_traceback(tmp_path: Path) -> None:
+        """An error inside a writer process reaches the caller with that process's frames."""
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 11, 12, 13])
+        bad = task / "train_data_3.npz"
+        bad.write_bytes(bad.read_bytes()[:3000])
+        with pytest.raises((DatasetFormatError, EpisodeFormatError)) as caught:
+            lr.convert_npz_to_lerobot(task, tmp_path / "data_lerobot", workers=2)
+        notes = "\n".join(getattr(caught.value, "__notes__", []))
+        assert "in LeRobot writer process" in notes and "Traceback" in notes
+
     def test_corrupt_input_names_the_file_and_writes_nothing(tmp_path: Path) -> None:
         task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 11])
         bad = task / "train_data_1.npz"

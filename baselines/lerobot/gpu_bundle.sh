@@ -2,13 +2,13 @@
 # The lerobot side of the lent GPU machine (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
-#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~59 MB)
+#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~74 MB)
 #   source baselines/lerobot/gpu_bundle.sh env        # there, in each call's command
 #   bash baselines/lerobot/gpu_bundle.sh check        # there, after env: what imports, what is missing
 #
 # "download" fetches lerobot 0.4.4 (--no-deps) and what its dataset, training and the two
 # policies' code import beyond the image (the list below), for cp312 manylinux, into
-# .carry/lerobot_wheels/ (~19 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
+# .carry/lerobot_wheels/ (~34 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
 # with the tracked tree each fits the 64 MiB one call may carry, so each travels in a call
 # of its own (in either order), without .gpu.
 #
@@ -46,6 +46,13 @@ LEROBOT_GPU_WHEELS=(
   # factory imports (dm-tree and its needs)
   "httpx==0.28.1" "httpcore==1.0.9" "h11==0.16.0" "anyio==4.16.0" "imageio==2.38.1"
   "dm-tree==0.1.10" "absl-py==2.5.1" "wrapt==2.5.2"
+  # The image's transformers 5.x needs huggingface-hub 1.x; lerobot imports transformers
+  # whenever it is installed (lerobot.processor), so it gets the one its own
+  # `transformers-dep` extra names, which works with hub 0.35
+  "transformers==4.57.6" "tokenizers==0.22.2"
+  # numpy 2.4 turns lerobot 0.4's float(shape-(1,) array) in save_episode (rewards, done
+  # flags) into a TypeError; the image has 2.4, and mikasa-datasets' lerobot extra pins <2.4
+  "numpy==2.3.5"
 )
 
 _download() {
@@ -106,18 +113,25 @@ modules = [
     "lerobot.policies.factory", "lerobot.scripts.lerobot_train", "lerobot.scripts.lerobot_eval",
     "mikasa_datasets.lerobot", "mikasa_bench.lerobot_policy", "mikasa_bench.lerobot_env",
 ]
-missing = {}
+missing, failed = {}, []
 for name in modules:
     try:
         importlib.import_module(name)
         print(f"ok      {name}")
     except Exception as exc:  # noqa: BLE001  (report every failure, go on)
         print(f"FAILED  {name}: {type(exc).__name__}: {exc}")
+        failed.append(name)
         if isinstance(exc, ModuleNotFoundError) and exc.name:
             missing.setdefault(exc.name.split(".")[0], name)
+import numpy
+
+if tuple(int(p) for p in numpy.__version__.split(".")[:2]) >= (2, 4):
+    print(f"FAILED  numpy {numpy.__version__}: lerobot 0.4's dataset writer needs numpy<2.4")
+    failed.append("numpy<2.4")
 import torchcodec._core as core
 print("ffmpeg:", core.get_ffmpeg_library_versions().get("ffmpeg_version"))
 print("missing top-level modules:", ", ".join(missing) or "none")
+raise SystemExit(f"{len(failed)} of {len(modules)} modules failed to import" if failed else 0)
 PY
 }
 

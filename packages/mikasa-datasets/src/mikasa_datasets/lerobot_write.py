@@ -39,6 +39,7 @@ import queue
 import shutil
 import threading
 import time
+import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -372,10 +373,29 @@ def _part_writer(
         )
         conn.send(("done", written))
     except BaseException as exc:  # reported to the parent, which raises it
+        # the traceback stays in this process: the parent's shows only its own frames
+        where = f"in LeRobot writer process {repo_id}:\n{traceback.format_exc()}"
         try:
+            exc.add_note(where)
             conn.send(("error", exc))
         except Exception:  # an exception that does not pickle
-            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+            conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}\n{where}")))
+
+
+def _check_numpy_for_writing() -> None:
+    """lerobot 0.4's ``save_episode`` calls ``float()`` on each frame's shape-(1,) value
+    (the reward, the done flag), which numpy 2.4 turns into a TypeError: say so before
+    anything is written."""
+    from importlib.metadata import version
+
+    numpy_version = tuple(int(p) for p in np.__version__.split(".")[:2])
+    lerobot_version = tuple(int(p) for p in version("lerobot").split(".")[:2])
+    if numpy_version >= (2, 4) and lerobot_version < (0, 5):
+        raise RuntimeError(
+            f"lerobot {version('lerobot')} cannot write datasets with numpy {np.__version__}: "
+            "its save_episode converts shape-(1,) arrays with float(), an error since numpy 2.4; "
+            "install numpy<2.4 beside it (pip install 'numpy<2.4', as mikasa-datasets[lerobot] pins)"
+        )
 
 
 def _write_in_parts(
@@ -483,6 +503,7 @@ def _convert(
     progress: Callable[[int, int], None] | None,
 ) -> ConversionResult:
     lerobot_dataset_class()  # import first: library start-up is not conversion time
+    _check_numpy_for_writing()
     t0 = time.perf_counter()
     if "{task}" not in repo_id_template:
         raise ValueError(f"repo id template {repo_id_template!r} must contain '{{task}}'")

@@ -72,8 +72,8 @@ class DatasetFormatError(ValueError):
         super().__init__(f"{path}: {problem}")
 
     def __reduce__(self) -> tuple[Any, ...]:
-        # Picklable (errors of a converter's worker process reach the caller).
-        return type(self), (self.path, self.problem)
+        # Picklable (errors of a converter's worker process reach the caller), notes too.
+        return type(self), (self.path, self.problem), self.__dict__
 
 
 def npz_task_files(npz_task_dir: str | os.PathLike[str], max_episodes: int | None = None) -> list[Path]:

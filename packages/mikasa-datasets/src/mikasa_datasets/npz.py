@@ -232,8 +232,8 @@ class EpisodeFormatError(ValueError):
         super().__init__(problem if path is None else f"{path}: {problem}")
 
     def __reduce__(self) -> tuple[Any, ...]:
-        # Picklable (errors of a converter's worker process reach the caller).
-        return type(self), (self.path, self.problem)
+        # Picklable (errors of a converter's worker process reach the caller), notes too.
+        return type(self), (self.path, self.problem), self.__dict__
 
 
 class EpisodeInvariantError(EpisodeFormatError):
