@@ -176,4 +176,20 @@ LEAKS: tuple[Leak, ...] = (
         "(the oracle's traces stay within 3 cm); the guess-rate chance follows the same rules",
         reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #28",
     ),
+    Leak(
+        tasks="TakeItBack",
+        leak="the push leaves its direction in view: when the target switches, the cube and the "
+        "gripper rest on the side of the target that faces the start, so the frame of the "
+        "switch tells the start row, and pulling the cube back the way it came needs no memory",
+        evidence="a LeRobot Diffusion Policy trained on 200 oracle demonstrations and fed one "
+        "frame (docs/BASELINES.md, H200 machine): 29/50 = 58 % [44 %, 71 %] against chance 0.35 "
+        "(row guess) and the memoryless oracle's 21/50; a probe of the oracle's pushes "
+        "(benchmarks/leak_probes/take_it_back_push_side.py, 24 seeds, state obs): the TCP's y "
+        "offset from the target at the switch is -0.032..-0.016 (row -1), -0.001..+0.019 "
+        "(row 0), +0.015..+0.041 (row +1)",
+        status="open",
+        fix="none yet: any push approaches the target from the start's side, so closing it "
+        "changes the task (e.g. the robot returned to a fixed pose when the target switches); "
+        "an owner decision, as for Intercept*",
+    ),
 )
