@@ -2,13 +2,13 @@
 # The lerobot side of the lent GPU machine (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
-#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~74 MB)
+#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~91 MB)
 #   source baselines/lerobot/gpu_bundle.sh env        # there, in each call's command
 #   bash baselines/lerobot/gpu_bundle.sh check        # there, after env: what imports, what is missing
 #
 # "download" fetches lerobot 0.4.4 (--no-deps) and what its dataset, training and the two
 # policies' code import beyond the image (the list below), for cp312 manylinux, into
-# .carry/lerobot_wheels/ (~34 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
+# .carry/lerobot_wheels/ (~51 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
 # with the tracked tree each fits the 64 MiB one call may carry, so each travels in a call
 # of its own (in either order), without .gpu.
 #
@@ -131,7 +131,7 @@ if tuple(int(p) for p in numpy.__version__.split(".")[:2]) >= (2, 4):
 import torchcodec._core as core
 print("ffmpeg:", core.get_ffmpeg_library_versions().get("ffmpeg_version"))
 print("missing top-level modules:", ", ".join(missing) or "none")
-raise SystemExit(f"{len(failed)} of {len(modules)} modules failed to import" if failed else 0)
+raise SystemExit(f"{len(failed)} check(s) failed: {', '.join(failed)}" if failed else 0)
 PY
 }
 
