@@ -146,9 +146,10 @@ def collection_rows(args: argparse.Namespace, tasks: list, work: Path) -> list[d
     )
     # One child per run; with --shared-pool one child per worker count runs every family
     # on one pool, as mikasa-collect runs several tasks.
-    runs = [([f], w) for f in reps for w in workers]
     if args.shared_pool:
         runs = [(list(reps), w) for w in workers]
+    else:
+        runs = [([f], w) for f in reps for w in workers]
     horizon_of = {f: h for f, (h, _) in reps.items()}
     family_of = {e: f for f, (_, e) in reps.items()}
     rows = []

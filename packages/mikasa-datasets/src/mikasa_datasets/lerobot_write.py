@@ -382,7 +382,7 @@ def _part_writer(
             conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}\n{where}")))
 
 
-def _check_numpy_for_writing() -> None:
+def check_numpy_for_writing() -> None:
     """lerobot 0.4's ``save_episode`` calls ``float()`` on each frame's shape-(1,) value
     (the reward, the done flag), which numpy 2.4 turns into a TypeError: say so before
     anything is written."""
@@ -503,7 +503,7 @@ def _convert(
     progress: Callable[[int, int], None] | None,
 ) -> ConversionResult:
     lerobot_dataset_class()  # import first: library start-up is not conversion time
-    _check_numpy_for_writing()
+    check_numpy_for_writing()
     t0 = time.perf_counter()
     if "{task}" not in repo_id_template:
         raise ValueError(f"repo id template {repo_id_template!r} must contain '{{task}}'")
