@@ -229,7 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--eval-workers",
         int,
         None,
-        "mikasa-bench run --workers (default --workers; 0 = in the bench's own process)",
+        "mikasa-bench run --workers of every evaluation (default: learned policies on a GPU "
+        "in the bench's own process, 0; the references and CPU policies on --workers)",
     )
     number(
         "--train-workers",
