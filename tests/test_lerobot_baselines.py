@@ -82,6 +82,24 @@ def test_train_args_overrides(tmp_path: Path) -> None:
     assert act["policy.push_to_hub"] == "false" and act["wandb.enable"] == "false"
 
 
+def test_eval_workers(tmp_path: Path) -> None:
+    """Learned policies on a GPU evaluate in the bench's own process unless --eval-workers
+    says otherwise; references and CPU policies use --workers."""
+
+    def driver(*extra: str, device: str) -> Driver:
+        args = rb.build_parser().parse_args(
+            ["--out", str(tmp_path), "--workers", "6", "--device", device, *extra]
+        )
+        return Driver(args)
+
+    on_gpu, on_cpu = driver(device="cuda"), driver(device="cpu")
+    act = on_gpu.settings["act"]
+    assert on_gpu.eval_workers(act) == 0 and on_gpu.eval_workers(None) == 6
+    assert on_cpu.eval_workers(act) == 6 and on_cpu.eval_workers(None) == 6
+    given = driver("--eval-workers", "2", device="cuda")
+    assert given.eval_workers(act) == 2 and given.eval_workers(None) == 2
+
+
 def test_vs_chance() -> None:
     """The verdict compares chance with the record's (mikasa-bench's Wilson) interval."""
     rec = {"status": "done", "sr_ci95": [0.05, 0.3]}
