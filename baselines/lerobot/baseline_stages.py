@@ -570,13 +570,13 @@ class Driver:
     # ---------------------------------------------------------------- eval
     def eval_workers(self, setting: Setting | None) -> int:
         """``mikasa-bench run --workers`` of an evaluation: ``--eval-workers`` when given;
-        else a learned policy on the GPU runs in the bench's own process (0) and the
-        references on ``--workers``. Several processes that each run a policy on one GPU
-        slow each other down: on an H200, 16 episodes of a 1-frame Diffusion policy took
-        41 s in-process, 71 s with one worker, 67 s with two and over 145 s with four."""
+        else a learned policy on the GPU runs in the bench's own process (0), since worker
+        processes that each run a copy on one GPU slow each other down (measured: the
+        README's "Evaluate learned policies in one process"), and the references on
+        ``--workers``."""
         if self.a.eval_workers is not None:
             return self.a.eval_workers
-        if setting is not None and self.device() == "cuda":
+        if setting is not None and self.device().startswith("cuda"):
             return 0
         return self.a.workers
 
