@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -82,9 +83,10 @@ def test_train_args_overrides(tmp_path: Path) -> None:
     assert act["policy.push_to_hub"] == "false" and act["wandb.enable"] == "false"
 
 
-def test_eval_workers(tmp_path: Path) -> None:
-    """Learned policies on a GPU evaluate in the bench's own process unless --eval-workers
-    says otherwise; references and CPU policies use --workers."""
+def test_eval_spread(tmp_path: Path) -> None:
+    """Learned policies on a GPU evaluate in lockstep batches (--eval-batch; 1: in the
+    bench's own process) unless --eval-workers says otherwise; references and CPU policies
+    use --workers."""
 
     def driver(*extra: str, device: str) -> Driver:
         args = rb.build_parser().parse_args(
@@ -94,10 +96,12 @@ def test_eval_workers(tmp_path: Path) -> None:
 
     on_gpu, on_cpu = driver(device="cuda"), driver(device="cpu")
     act = on_gpu.settings["act"]
-    assert on_gpu.eval_workers(act) == 0 and on_gpu.eval_workers(None) == 6
-    assert on_cpu.eval_workers(act) == 6 and on_cpu.eval_workers(None) == 6
+    assert on_gpu.eval_exec(act) == ["--policy-batch", "10"]
+    assert on_gpu.eval_exec(None) == ["--workers", "6"]
+    assert on_cpu.eval_exec(act) == on_cpu.eval_exec(None) == ["--workers", "6"]
+    assert driver("--eval-batch", "1", device="cuda").eval_exec(act) == ["--workers", "0"]
     given = driver("--eval-workers", "2", device="cuda")
-    assert given.eval_workers(act) == 2 and given.eval_workers(None) == 2
+    assert given.eval_exec(act) == given.eval_exec(None) == ["--workers", "2"]
 
 
 def test_vs_chance() -> None:
@@ -155,7 +159,7 @@ else:
             "--episodes", "3", "--steps", "6", "--batch-size", "4", "--eval-episodes", "2",
             "--device", "cpu", "--workers", "1", "--eval-workers", "0", "--train-workers", "0",
             "--log-freq", "2", "--out", str(out), "--doc", str(out / "BASELINES.md"),
-            *extra,
+            "--records-from", "", *extra,
         ]  # fmt: skip
         return rb.main(argv)
 
@@ -222,6 +226,13 @@ else:
         assert _driver(out, "--pack", str(tmp_path / "pack.tar.gz")) == rb.EXIT_OK
         assert _commands_run(out) == before
         assert (tmp_path / "pack.tar.gz").stat().st_size > 0
+
+        # 4b) records lost (a fresh clone has only the committed table): restored from the
+        # table's JSON, nothing is redone.
+        shutil.rmtree(out / "records")
+        assert _driver(out, "--records-from", str(out / "BASELINES.json")) == rb.EXIT_OK
+        assert _commands_run(out) == before
+        assert json.loads((records / "eval-act.json").read_text()) == ev
 
         # 5) other training arguments are refused, not silently mixed with the records.
         assert _driver(out, "--steps", "7", "--stages", "train,eval") == rb.EXIT_FAILED

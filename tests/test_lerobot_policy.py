@@ -213,6 +213,40 @@ else:
         with pytest.raises(BenchError, match="--obs-mode rgb"):
             policy.forward({"state": torch.zeros(1, 35), "proprio": obs["proprio"]})
 
+    def test_forward_batch_gives_each_env_its_action(act_dir: Path) -> None:
+        """B observations in one call: row i is what forward gives observation i alone
+        (a deterministic policy), and the queue holds the rest of every env's chunk."""
+        policy = LeRobotPolicy(act_dir, env_id=TASK, device="cpu")
+        g = torch.Generator().manual_seed(1)
+        batch = [
+            {
+                "rgb": torch.randint(0, 256, (1, 128, 128, 6), dtype=torch.uint8, generator=g),
+                "proprio": torch.randn(1, 7, generator=g),
+            }
+            for _ in range(3)
+        ]
+        policy.reset()
+        actions = policy.forward_batch(batch)
+        assert actions.shape == (3, 7) and actions.dtype == torch.float32
+        assert len(policy.policy._action_queue) == 4 and policy.policy._action_queue[0].shape == (3, 7)
+        for obs, row in zip(batch, actions, strict=True):
+            policy.reset()
+            assert torch.allclose(policy.forward(obs), row, atol=1e-5)
+
+    def test_bench_runs_a_lerobot_policy_in_lockstep(
+        act_dir: Path, bench_run: dict, tmp_path: Path
+    ) -> None:
+        """``--policy-batch`` (one env here: the first episode is a round of its own): the
+        same episode as the one-at-a-time run."""
+        out = tmp_path / "run"
+        argv = ["run", "--task", TASK, "--policy", f"lerobot:{act_dir}", "--num-episodes", "1"]
+        argv += ["--policy-batch", "4", "--no-progress", "--no-report", "--out", str(out)]
+        argv += ["--policy-kwargs", json.dumps({"device": "cpu"})]
+        assert cli.main(argv) == 0
+        result = json.loads((out / f"{TASK}.json").read_text())
+        assert result["returns"] == pytest.approx(bench_run["returns"], abs=1e-6)
+        assert result["successes"] == bench_run["successes"]
+
     def test_mismatched_features_name_both_sides(tmp_path: Path, capsys) -> None:
         d = save_tiny_act(
             tmp_path / "pretrained_model",

@@ -146,6 +146,12 @@ def _bench_result(run_dir: Path, task: str) -> dict[str, Any] | None:
     return next((r for r in results if r.get("env_id") == task), None)
 
 
+def _bench_lockstep(run_dir: Path) -> bool:
+    """Whether a mikasa-bench run directory plays its episodes in lockstep (--policy-batch)."""
+    meta = read_json(run_dir / "meta" / "run.json") or {}
+    return int((meta.get("config") or {}).get("policy_batch", 1)) > 1
+
+
 class Driver:
     """The configured run's layout under ``--out``, its records and its units."""
 
@@ -568,17 +574,20 @@ class Driver:
         )
 
     # ---------------------------------------------------------------- eval
-    def eval_workers(self, setting: Setting | None) -> int:
-        """``mikasa-bench run --workers`` of an evaluation: ``--eval-workers`` when given;
-        else a learned policy on the GPU runs in the bench's own process (0), since worker
-        processes that each run a copy on one GPU slow each other down (measured: the
-        README's "Evaluate learned policies in one process"), and the references on
-        ``--workers``."""
+    def eval_exec(self, setting: Setting | None) -> list[str]:
+        """How ``mikasa-bench run`` spreads an evaluation: ``--workers`` from
+        ``--eval-workers`` when given; else a learned policy on a GPU plays ``--eval-batch``
+        episodes in lockstep with one batched policy call per step (``--policy-batch``),
+        since one episode at a time leaves the GPU waiting and worker processes that each
+        run a copy on one GPU slow each other down (the README's "Evaluate learned policies
+        in batches"); the references run on ``--workers``."""
         if self.a.eval_workers is not None:
-            return self.a.eval_workers
+            return ["--workers", str(self.a.eval_workers)]
         if setting is not None and self.device().startswith("cuda"):
-            return 0
-        return self.a.workers
+            if self.a.eval_batch > 1:
+                return ["--policy-batch", str(self.a.eval_batch)]
+            return ["--workers", "0"]
+        return ["--workers", str(self.a.workers)]
 
     def evaluate(self, task: str, name: str, setting: Setting | None) -> None:
         """``mikasa-bench run`` of a trained setting (``lerobot:<checkpoint>``) or a reference
@@ -608,15 +617,19 @@ class Driver:
         final = self.eval_dir(task, name)
         part = self.partial(final)
         bench = self.cli(self.python, "mikasa-bench", "mikasa_bench.cli")
-        common = ["--workers", str(self.eval_workers(setting)), "--no-progress", "--no-report"]
+        common = ["--no-progress", "--no-report"]
         resume = (part / "meta" / "run.json").is_file()
         if resume:
             argv = bench + ["run", "--resume", str(part), *common]
+            if not _bench_lockstep(part):  # a lockstep run starts its own env processes
+                spread = self.eval_exec(setting)
+                argv += spread if spread[0] == "--workers" else ["--workers", "0"]
         else:
             if part.exists():
                 shutil.rmtree(part)
             argv = bench + ["run", "--task", task, "--policy", target]
             argv += ["--num-episodes", str(self.a.eval_episodes), "--out", str(part), *common]
+            argv += self.eval_exec(setting)
             if setting is not None:
                 argv += ["--policy-kwargs", json.dumps({"device": self.device()})]
             if self.a.render_device:

@@ -3,7 +3,8 @@ records, table and log tails that travels back from a lent machine.
 
 `build_table` gathers everything the table shows into a JSON-ready dict (chance from
 ``mikasa_bench.chance``, the memory type from the task manifest); `render_markdown` writes
-it as Markdown.
+it as Markdown. The JSON holds every record, so `restore_records` can bring a fresh clone's
+(or a fresh machine's) records back from the committed table.
 """
 
 from __future__ import annotations
@@ -15,12 +16,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from baseline_common import DRIVER_CALL, log, now, read_json, rel
+from baseline_common import DRIVER_CALL, log, now, read_json, rel, write_json
 from baseline_settings import DEFAULT_REFERENCES, DEFAULT_TASKS
 from baseline_stages import Driver
 from mikasa_bench.chance import task_chance
 
-__all__ = ["build_table", "render_markdown", "pack"]
+__all__ = ["build_table", "render_markdown", "pack", "restore_records"]
 
 REFERENCE_LABELS = {
     "oracle": "oracle",
@@ -314,6 +315,29 @@ def _left(t: Mapping[str, Any]) -> list[str]:
     out.append("Not yet evaluated:\n")
     out += [f"- {task}: {', '.join(names)}" for task, names in t["pending"].items()]
     return [*out, ""]
+
+
+def restore_records(d: Driver, table_json: Path) -> int:
+    """Write the finished records of a table JSON (``docs/BASELINES.json``) that
+    ``<out>/records`` lacks; returns how many. The records directory is not committed, the
+    table is: this lets a fresh clone add rows to the committed table and skip the units it
+    already shows (units whose outputs a later unit needs, e.g. a dataset for a training,
+    are redone when those outputs are missing)."""
+    table = read_json(table_json)
+    if not isinstance(table, dict):
+        return 0
+    restored = 0
+    for rec in table.get("records") or []:
+        if not (isinstance(rec, dict) and rec.get("status") == "done"):
+            continue
+        task, unit = str(rec.get("task", "")), str(rec.get("unit", ""))
+        if not task or not unit or "/" in task + unit or d.record_path(task, unit).exists():
+            continue
+        write_json(d.record_path(task, unit), rec)
+        restored += 1
+    if restored:
+        log(f"restored {restored} record(s) from {rel(table_json)}")
+    return restored
 
 
 def pack(d: Driver, path: Path) -> None:

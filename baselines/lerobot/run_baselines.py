@@ -41,7 +41,7 @@ from typing import IO, Any
 from baseline_common import REPO, TimeUp, UnitFailed, log, rel, write_json, write_text
 from baseline_settings import DEFAULT_REFERENCES, DEFAULT_SETTINGS, DEFAULT_TASKS, make_settings
 from baseline_stages import Driver
-from baseline_table import build_table, pack, render_markdown
+from baseline_table import build_table, pack, render_markdown, restore_records
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_TIME = 0, 1, 2, 3
 STAGES = ("collect", "convert", "train", "eval", "table")
@@ -105,6 +105,8 @@ def drive(d: Driver) -> int:
         f"{', '.join(d.a.policies)}; references {', '.join(d.a.references) or '-'}; "
         f"time limit {d.a.time_limit or 'none'}"
     )
+    if d.a.records_from:
+        restore_records(d, Path(d.a.records_from))
     for task in d.a.tasks if stages - {"table"} else []:
         if timed_out:
             break
@@ -230,7 +232,15 @@ def build_parser() -> argparse.ArgumentParser:
         int,
         None,
         "mikasa-bench run --workers of every evaluation (default: learned policies on a GPU "
-        "in the bench's own process, 0; the references and CPU policies on --workers)",
+        "in lockstep batches, see --eval-batch; the references and CPU policies on --workers)",
+    )
+    number(
+        "--eval-batch",
+        int,
+        10,
+        "episodes a learned policy on a GPU plays in lockstep, one batched policy call per "
+        "step (mikasa-bench run --policy-batch; default 10: the 10 scenes of 50 episodes; 1: "
+        "one episode at a time, in the bench's own process)",
     )
     number(
         "--train-workers",
@@ -265,6 +275,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--doc",
         default=str(REPO / "docs" / "BASELINES.md"),
         help="table path (default docs/BASELINES.md; JSON beside it)",
+    )
+    add(
+        "--records-from",
+        default=str(REPO / "docs" / "BASELINES.json"),
+        metavar="TABLE.json",
+        help="restore the records this table JSON holds and <out>/records lacks, so a fresh "
+        "clone goes on where the committed table stands (default docs/BASELINES.json; '' for "
+        "none)",
     )
     add(
         "--pack",

@@ -56,6 +56,7 @@ _RUN_DEFINING = (
     "video",
     "render_device",
     "gpu_render_workers",
+    "policy_batch",
     "out",
     "output_dir",
     "csv",
@@ -155,6 +156,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="mixed pool, with --render-device cpu: the first N workers render on the GPU, "
         "the others on the CPU",
+    )
+    run.add_argument(
+        "--policy-batch",
+        type=int,
+        default=None,
+        metavar="B",
+        help="play B episodes in lockstep (B env processes) with one policy call per step for "
+        "all, in this process: for learned policies on a GPU (lerobot:DIR, or a class with "
+        "forward_batch); replaces --workers; a stochastic policy's results depend on B",
     )
     out = run.add_mutually_exclusive_group()
     out.add_argument("--out", default=None, metavar="DIR", help="exact run directory")
@@ -335,6 +345,7 @@ def _config(args: argparse.Namespace) -> BenchmarkConfig:
             save_videos=bool(args.video),
             render_device=args.render_device or "auto",
             gpu_render_workers=args.gpu_render_workers or 0,
+            policy_batch=args.policy_batch or 1,
         )
     except ValueError as exc:
         raise BenchError(str(exc)) from None
@@ -368,6 +379,29 @@ def _executor_from(args: argparse.Namespace) -> Any:
     )
 
 
+def _lockstep_executor(args: argparse.Namespace, batch: int) -> Any:
+    """The executor of a ``--policy-batch`` run (its envs are its own processes)."""
+    from .lockstep import LockstepExecutor
+
+    given = [
+        flag
+        for flag, value in (
+            ("--workers", getattr(args, "workers", None)),
+            ("--envs-per-worker", getattr(args, "envs_per_worker", None)),
+            ("--address", getattr(args, "address", None)),
+        )
+        if value is not None
+    ]
+    if getattr(args, "executor", "local") != "local":
+        given.append(f"--executor {args.executor}")
+    if given:
+        raise BenchError(
+            f"a --policy-batch run plays its B episodes in B env processes of its own with the "
+            f"policy in this process; do not pass {', '.join(given)}"
+        )
+    return LockstepExecutor(batch)
+
+
 def _execute_and_report(
     stores: list[Any],
     args: argparse.Namespace,
@@ -380,11 +414,15 @@ def _execute_and_report(
     from .runner import execute_runs
 
     executor = executor if executor is not None else _executor_from(args)
+    if any(s.config.policy_batch > 1 for s in stores):
+        executor = _lockstep_executor(args, max(s.config.policy_batch for s in stores))
     dirs = ", ".join(str(s.run_dir) for s in stores)
     pending = sum(len(s.pending()) for s in stores)
     total = sum(s.config.n_episodes * len(s.tasks) for s in stores)
     desc = executor.describe()
     details = [f"{desc['workers']} workers"] if "workers" in desc else []
+    if "policy_batch" in desc:
+        details.append(f"{desc['policy_batch']} episodes in lockstep, one policy call per step")
     if desc.get("envs_per_worker", "auto") not in ("auto", 1):
         details.append(f"envs per worker: {desc['envs_per_worker']}")
     if "address" in desc:

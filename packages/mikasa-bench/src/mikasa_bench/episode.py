@@ -23,6 +23,7 @@ from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 __all__ = [
     "EpisodeResult",
     "EpisodeRngs",
+    "first_value",
     "make_benchmark_env",
     "normalize_action_chunk",
     "run_episode",
@@ -104,8 +105,9 @@ class EpisodeRngs:
                 _set_global_rng_states(saved)
 
 
-def _first(x: Any) -> Any:
-    """First element of a batched value (tensor, array, list) or the value itself."""
+def first_value(x: Any) -> Any:
+    """First element of a batched value (tensor, array, list) or the value itself: env 0's
+    reward, flag or success of a ``num_envs=1`` env."""
     if hasattr(x, "reshape") and hasattr(x, "shape"):
         flat = x.reshape(-1)
         return flat[0] if len(flat) else False
@@ -237,10 +239,10 @@ def run_episode(
         action = queue.popleft().to(device=device, dtype=torch.float32).unsqueeze(0)
         obs, reward, terminated, truncated, info = env.step(action)
         n_steps += 1
-        total += float(_first(reward))
+        total += float(first_value(reward))
         if isinstance(info, dict) and "success" in info:
-            success = success or bool(_first(info["success"]))
-        if bool(_first(terminated)) or bool(_first(truncated)):
+            success = success or bool(first_value(info["success"]))
+        if bool(first_value(terminated)) or bool(first_value(truncated)):
             break
     if sink is not None:
         sink(compose_frame(env.render(), obs))  # the state after the last step

@@ -29,7 +29,7 @@ from __future__ import annotations
 import functools
 import os
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -338,15 +338,29 @@ class LeRobotPolicy:
 
     def forward(self, obs: Mapping[str, Any]) -> Any:
         """One action ``(7,)`` (float32, CPU) for the observation ``obs``."""
+        action = self._select(observation_to_lerobot(obs, self.instruction))
+        return action[0] if action.ndim == 2 and action.shape[0] == 1 else action
+
+    def forward_batch(self, observations: Sequence[Mapping[str, Any]]) -> Any:
+        """One action per env, ``(B, 7)`` (float32, CPU), for B envs stepped in lockstep
+        (``mikasa-bench run --policy-batch B``): one batch through the processors and
+        ``select_action``, whose action queue then holds a chunk for every env, as under
+        lerobot-eval's vector envs."""
         import torch
 
-        batch = observation_to_lerobot(obs, self.instruction)
+        parts = [observation_to_lerobot(obs, self.instruction) for obs in observations]
+        batch = {k: torch.cat([p[k] for p in parts]) for k in (TOP_KEY, WRIST_KEY, STATE_KEY)}
+        batch[TASK_KEY] = [t for p in parts for t in p[TASK_KEY]]
+        return self._select(batch)
+
+    def _select(self, batch: dict[str, Any]) -> Any:
+        import torch
+
         with torch.inference_mode():
             batch = self.preprocessor(batch)
             action = self.policy.select_action(batch)
             action = self.postprocessor(action)
-        action = action.detach().to("cpu", torch.float32)
-        return action[0] if action.ndim == 2 and action.shape[0] == 1 else action
+        return action.detach().to("cpu", torch.float32)
 
 
 # ------------------------------------------------------------------------------------

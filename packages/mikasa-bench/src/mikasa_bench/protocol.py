@@ -94,6 +94,8 @@ class BenchmarkConfig:
     instead, a mixed pool for machines where one GPU cannot keep up with every worker).
     ``save_videos`` records one mp4 per episode (scene view with the task's overlays beside
     the two cameras); it only changes ``render()`` frames, never observations or results.
+    ``policy_batch`` > 1 plays that many episodes in lockstep with one policy call per step
+    for all (`mikasa_bench.lockstep`): a stochastic policy's draws then depend on it.
     """
 
     start_seed: int = START_SEED
@@ -106,6 +108,7 @@ class BenchmarkConfig:
     save_videos: bool = False
     render_device: str = "auto"
     gpu_render_workers: int = 0
+    policy_batch: int = 1
 
     def __post_init__(self) -> None:
         if self.n_episodes <= 0:
@@ -121,6 +124,13 @@ class BenchmarkConfig:
             raise ValueError(
                 f"unsupported render_device {self.render_device!r}; expected one of "
                 f"{', '.join(RENDER_DEVICES)}"
+            )
+        if self.policy_batch < 1:
+            raise ValueError(f"policy_batch must be >= 1, got {self.policy_batch}")
+        if self.policy_batch > 1 and self.save_videos:
+            raise ValueError(
+                "videos are recorded one episode at a time: use policy_batch 1 (no "
+                "--policy-batch) with --video"
             )
         if self.gpu_render_workers < 0:
             raise ValueError(f"gpu_render_workers must be >= 0, got {self.gpu_render_workers}")
@@ -193,10 +203,28 @@ def protocol_settings(config: BenchmarkConfig) -> dict[str, Any]:
         "sim_backend": config.sim_backend,
         "render_device": config.render_description(),
         "save_videos": config.save_videos,
-        "policy_reset": "policy.reset() (if defined) at every episode start",
-        "policy_rng_seed": "python/numpy/torch global RNGs seeded with the episode seed",
+        **_policy_calls(config.policy_batch),
         "canonical": not devs,
         "deviations": devs,
+    }
+
+
+def _policy_calls(batch: int) -> dict[str, Any]:
+    """How the policy was called: one episode at a time, or ``batch`` in lockstep."""
+    if batch == 1:
+        return {
+            "policy_batch": 1,
+            "policy_reset": "policy.reset() (if defined) at every episode start",
+            "policy_rng_seed": "python/numpy/torch global RNGs seeded with the episode seed",
+        }
+    return {
+        "policy_batch": batch,
+        "policy_reset": (
+            f"policy.reset() (if defined) at the start of every round of up to {batch} "
+            f"episodes played in lockstep (episode r of {batch} consecutive scenes), one "
+            f"policy.forward_batch call per step for all"
+        ),
+        "policy_rng_seed": "python/numpy/torch global RNGs seeded with the round's first episode seed",
     }
 
 

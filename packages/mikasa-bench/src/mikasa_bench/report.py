@@ -327,6 +327,8 @@ def _run_info(run: RunData) -> list[tuple[str, str]]:
         info.append(("sim backend", str(proto.get("sim_backend"))))
         if proto.get("render_device"):
             info.append(("render device", str(proto["render_device"])))
+        if proto.get("policy_batch", 1) > 1:
+            info.append(("policy batch", f"{proto['policy_batch']} episodes in lockstep"))
     sel = s.get("selection") or {}
     if sel.get("skipped_unregistered"):
         info.append(("skipped (not registered)", ", ".join(sel["skipped_unregistered"])))

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mikasa_bench.episode import first_value
 from mikasa_bench.lerobot_policy import (
     ACTION_KEY,
     IMAGE_SIZE,
@@ -239,13 +240,13 @@ class MikasaLeRobotEnv(gym.Env):
         )
         obs, reward, terminated, truncated, info = self._env.step(a)
         self._steps += 1
-        success = bool(_first(info.get("success", False)))
+        success = bool(first_value(info.get("success", False)))
         self._success = self._success or success
-        truncated = bool(_first(truncated)) or self._steps >= self._max_episode_steps
+        truncated = bool(first_value(truncated)) or self._steps >= self._max_episode_steps
         return (
             self._observation(obs),
-            float(_first(reward)),
-            bool(_first(terminated)),
+            float(first_value(reward)),
+            bool(first_value(terminated)),
             truncated,
             {"is_success": self._success, "success": success},
         )
@@ -262,14 +263,6 @@ class MikasaLeRobotEnv(gym.Env):
         env, self._env = getattr(self, "_env", None), None
         if env is not None:
             env.close()
-
-
-def _first(x: Any) -> Any:
-    """The value of env 0 of a batched (``num_envs=1``) tensor/array, or ``x`` itself."""
-    if hasattr(x, "reshape") and hasattr(x, "shape"):
-        flat = x.reshape(-1)
-        return flat[0].item() if len(flat) else False
-    return x
 
 
 if GYM_ID not in gym.registry:
