@@ -19,7 +19,9 @@ import importlib.util
 import json
 import os
 import shutil
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -236,6 +238,30 @@ else:
 
         # 5) other training arguments are refused, not silently mixed with the records.
         assert _driver(out, "--steps", "7", "--stages", "train,eval") == rb.EXIT_FAILED
+
+    def test_drivers_side_by_side_share_the_settings(tmp_path: Path) -> None:
+        """Two drivers on one task: one prepares the data while the other waits, then each
+        setting is trained exactly once (by whichever driver took its lock)."""
+        out = tmp_path / "run"
+        argv = [
+            sys.executable, rb.__file__, "--tasks", TASK, "--policies", "act,act-chunk",
+            "--references", "", "--stages", "collect,convert,train", "--scale", "tiny",
+            "--episodes", "2", "--steps", "4", "--batch-size", "4", "--device", "cpu",
+            "--workers", "1", "--train-workers", "0", "--out", str(out), "--records-from", "",
+            "--doc", str(out / "BASELINES.md"),
+        ]  # fmt: skip
+        env = {**os.environ, "OMP_NUM_THREADS": "1"}
+        drivers = [subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
+        time.sleep(1)
+        drivers.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
+        logs = [p.communicate(timeout=900)[0] for p in drivers]
+        assert all(p.returncode in (rb.EXIT_OK, rb.EXIT_TIME) for p in drivers), logs
+        assert any("waiting for another driver" in log for log in logs), logs
+        records = out / "records" / TASK
+        for setting in ("act", "act-chunk"):
+            train = json.loads((records / f"train-{setting}.json").read_text())
+            assert train["calls"] == 1 and train["steps"] == 4
+        assert sum(log.count(": trained ") for log in logs) == 2
 
     @pytest.fixture(autouse=True)
     def _quiet_torch() -> None:

@@ -34,23 +34,32 @@ import argparse
 import fcntl
 import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any
 
 from baseline_common import REPO, TimeUp, UnitFailed, log, rel, write_json, write_text
-from baseline_settings import DEFAULT_REFERENCES, DEFAULT_SETTINGS, DEFAULT_TASKS, make_settings
+from baseline_settings import (
+    DEFAULT_REFERENCES,
+    DEFAULT_SETTINGS,
+    DEFAULT_TASKS,
+    Setting,
+    make_settings,
+)
 from baseline_stages import Driver
 from baseline_table import build_table, pack, render_markdown, restore_records
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_TIME = 0, 1, 2, 3
+WAIT_S = 10.0  # how often a driver looks again at data another driver is preparing
 STAGES = ("collect", "convert", "train", "eval", "table")
 
 
-def lock(d: Driver, task: str) -> IO[str] | None:
-    """An exclusive non-blocking flock on the task's records (an open file; None when
-    another driver holds it): drivers started side by side share the tasks out."""
-    path = d.records / task / ".lock"
+def lock(d: Driver, task: str, setting: str | None = None) -> IO[str] | None:
+    """An exclusive non-blocking flock (an open file; None when another driver holds it) on
+    a task's data and references (``setting`` None) or on one setting's training and
+    evaluation: drivers started side by side share the units out."""
+    path = d.records / task / (".lock" if setting is None else f".lock-{setting}")
     path.parent.mkdir(parents=True, exist_ok=True)
     fh = open(path, "w")  # noqa: SIM115  # kept open as the lock's handle
     try:
@@ -61,21 +70,23 @@ def lock(d: Driver, task: str) -> IO[str] | None:
     return fh
 
 
-def run_task(d: Driver, task: str, stages: set[str]) -> None:
-    """Every unit of one task that ``stages`` asks for and the records lack, in order:
-    collect -> convert -> the references' evaluations -> per setting train, evaluate."""
+def needs_training(d: Driver, task: str, setting: Setting) -> bool:
+    """Whether the setting still has to be trained (no checkpoint, and its evaluation or
+    its training record missing)."""
+    return d.trained(task, setting.name) is None and (
+        d.record(task, f"eval-{setting.name}") is None
+        or d.record(task, f"train-{setting.name}") is None
+    )
+
+
+def prepare_task(d: Driver, task: str, stages: set[str]) -> None:
+    """A task's shared units that ``stages`` asks for and the records lack, in order:
+    collect -> convert (when a setting still needs the data) -> the references' evaluations."""
     settings = [d.settings[s] for s in d.a.policies]
     if stages & {"train", "eval"}:
         for s in settings:
             d.check_train_record(task, s)
-    need_eval = [s for s in settings if d.record(task, f"eval-{s.name}") is None]
-    need_train = [
-        s
-        for s in settings
-        if d.trained(task, s.name) is None
-        and (s in need_eval or d.record(task, f"train-{s.name}") is None)
-    ]
-    need_data = bool(need_train) and "train" in stages
+    need_data = "train" in stages and any(needs_training(d, task, s) for s in settings)
     # Collection is only needed for a dataset that is not converted yet; with "collect"
     # asked for explicitly it runs anyway (a no-op when the episodes are there).
     if "collect" in stages or (need_data and d.converted(task) is None):
@@ -85,17 +96,75 @@ def run_task(d: Driver, task: str, stages: set[str]) -> None:
     if "eval" in stages:
         for ref in d.a.references:
             d.evaluate(task, ref, None)
-    for s in settings:
-        if "train" in stages and s in need_train:
-            d.train(task, s)
-        # Without "train" in --stages an untrained setting stays pending.
-        trained = d.trained(task, s.name) is not None
-        if "eval" in stages and (trained or d.record(task, f"eval-{s.name}") is not None):
-            d.evaluate(task, s.name, s)
+
+
+def run_setting(d: Driver, task: str, setting: Setting, stages: set[str]) -> None:
+    """One setting's training and evaluation, as ``stages`` asks and the records lack."""
+    if "train" in stages and needs_training(d, task, setting):
+        d.train(task, setting)
+    # Without "train" in --stages an untrained setting stays pending.
+    trained = d.trained(task, setting.name) is not None
+    if "eval" in stages and (trained or d.record(task, f"eval-{setting.name}") is not None):
+        d.evaluate(task, setting.name, setting)
+
+
+def run_units(d: Driver, stages: set[str]) -> tuple[list[str], list[str]]:
+    """Every task's shared units, then each setting's, each under its lock; drivers side by
+    side take different units (one prepares a task's data while another trains a setting of
+    a task whose data is there). A driver waits while another prepares the data a setting it
+    could train needs, and leaves units that another driver is training. Returns the
+    failures and the units held by other drivers; raises `TimeUp`."""
+    settings = [d.settings[s] for s in d.a.policies]
+    failures: list[str] = []
+    finished: set[tuple[str, str | None]] = set()
+    broken: set[str] = set()  # tasks whose shared units failed: their settings wait for a rerun
+    while True:
+        busy: list[str] = []
+        waiting = False  # a unit here needs data that another driver is preparing
+        for task in d.a.tasks:
+            if task in broken:
+                continue
+            if (task, None) not in finished:
+                held = lock(d, task)
+                if held is None:
+                    busy.append(task)
+                    waiting = waiting or bool(settings)
+                    continue
+                try:
+                    prepare_task(d, task, stages)
+                    finished.add((task, None))
+                except UnitFailed as exc:
+                    failures.append(str(exc))
+                    broken.add(task)
+                    log(f"FAILED {exc}")
+                    continue
+                finally:
+                    held.close()  # releases the flock
+            for s in settings:
+                if (task, s.name) in finished:
+                    continue
+                held = lock(d, task, s.name)
+                if held is None:
+                    busy.append(f"{task} {s.name}")
+                    continue
+                try:
+                    run_setting(d, task, s, stages)
+                    finished.add((task, s.name))
+                except UnitFailed as exc:
+                    failures.append(str(exc))
+                    finished.add((task, s.name))
+                    log(f"FAILED {exc}")
+                finally:
+                    held.close()
+        if not waiting:
+            return failures, busy
+        d.check_time("waiting", "for another driver", need_s=WAIT_S)
+        log(f"waiting for another driver: {', '.join(busy)}")
+        time.sleep(WAIT_S)
 
 
 def drive(d: Driver) -> int:
-    """Every task (each under its lock), then the table and the pack; the exit status."""
+    """Every unit (`run_units`), then the table and the pack; the exit status."""
     stages = set(d.a.stages)
     timed_out: str | None = None
     failures: list[str] = []
@@ -107,23 +176,11 @@ def drive(d: Driver) -> int:
     )
     if d.a.records_from:
         restore_records(d, Path(d.a.records_from))
-    for task in d.a.tasks if stages - {"table"} else []:
-        if timed_out:
-            break
-        held = lock(d, task)
-        if held is None:
-            busy.append(task)
-            log(f"{task}: busy (another driver holds it); skipped in this call")
-            continue
+    if stages - {"table"}:
         try:
-            run_task(d, task, stages - {"table"})
+            failures, busy = run_units(d, stages - {"table"})
         except TimeUp as exc:
             timed_out = str(exc)
-        except UnitFailed as exc:
-            failures.append(str(exc))
-            log(f"FAILED {exc}")
-        finally:
-            held.close()  # releases the flock
     if "table" in stages:
         table = build_table(d)
         write_text(Path(d.a.doc), render_markdown(table))

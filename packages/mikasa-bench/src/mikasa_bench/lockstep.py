@@ -371,7 +371,7 @@ def _play_round(
         replies = pool.command(
             {i: ("step", queues[i].popleft().numpy().astype(np.float32)) for i in active}
         )
-        for i, (o, reward, ok, done) in replies.items():
+        for i, (o, reward, ok, _) in replies.items():
             obs[i] = _torch_tree(o)
             total[i] += reward
             steps[i] += 1
