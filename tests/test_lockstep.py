@@ -121,11 +121,15 @@ def test_bad_combinations_are_refused(tmp_path, capsys):
     assert "no forward_batch" in err and "NoBatchPolicy" in err
 
 
-@pytest.mark.parametrize("policy", ["StatePolicy", "CountingChunkPolicy"])
-def test_lockstep_matches_one_episode_at_a_time(tmp_path, policy):
+@pytest.mark.parametrize(
+    "policy, envs_per_process", [("StatePolicy", "1"), ("CountingChunkPolicy", "2")]
+)
+def test_lockstep_matches_one_episode_at_a_time(tmp_path, policy, envs_per_process):
+    """Also with two envs per env process, stepped in threads."""
     target = f"{HERE}:{policy}"
     assert _run(tmp_path / "inline", target, "--workers", "0") == 0
-    assert _run(tmp_path / "batch", target, "--policy-batch", "3") == 0
+    extra = ("--policy-batch", "3", "--envs-per-worker", envs_per_process)
+    assert _run(tmp_path / "batch", target, *extra) == 0
     assert _episodes(tmp_path / "batch") == _episodes(tmp_path / "inline")
     run = json.loads((tmp_path / "batch" / "meta" / "run.json").read_text())
     assert run["config"]["policy_batch"] == 3

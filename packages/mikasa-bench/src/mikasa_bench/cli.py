@@ -162,9 +162,10 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         metavar="B",
-        help="play B episodes in lockstep (B env processes) with one policy call per step for "
-        "all, in this process: for learned policies on a GPU (lerobot:DIR, or a class with "
-        "forward_batch); replaces --workers; a stochastic policy's results depend on B",
+        help="play B episodes in lockstep with one policy call per step for all, the policy in "
+        "this process and the envs in processes of --envs-per-worker each: for learned "
+        "policies on a GPU (lerobot:DIR, or a class with forward_batch); replaces --workers; a "
+        "stochastic policy's results depend on B",
     )
     out = run.add_mutually_exclusive_group()
     out.add_argument("--out", default=None, metavar="DIR", help="exact run directory")
@@ -387,7 +388,6 @@ def _lockstep_executor(args: argparse.Namespace, batch: int) -> Any:
         flag
         for flag, value in (
             ("--workers", getattr(args, "workers", None)),
-            ("--envs-per-worker", getattr(args, "envs_per_worker", None)),
             ("--address", getattr(args, "address", None)),
         )
         if value is not None
@@ -396,10 +396,10 @@ def _lockstep_executor(args: argparse.Namespace, batch: int) -> Any:
         given.append(f"--executor {args.executor}")
     if given:
         raise BenchError(
-            f"a --policy-batch run plays its B episodes in B env processes of its own with the "
-            f"policy in this process; do not pass {', '.join(given)}"
+            f"a --policy-batch run plays its B episodes in env processes of its own (see "
+            f"--envs-per-worker) with the policy in this process; do not pass {', '.join(given)}"
         )
-    return LockstepExecutor(batch)
+    return LockstepExecutor(batch, getattr(args, "envs_per_worker", None))
 
 
 def _execute_and_report(

@@ -16,8 +16,10 @@ scene for round 0), seeds the global RNGs with its first episode's seed, resets 
 once (a LeRobot policy's action queue and observation history are per batch) and steps
 until every episode has ended; an episode that ends early keeps its last observation in the
 batch and its actions are dropped. A deterministic policy gives the same per-episode
-results as the unbatched run; a stochastic one draws its noise per batch (recorded in the
-result files' protocol as ``policy_batch``). On a resume, a group of scenes with any
+results as the unbatched run wherever its batched arithmetic gives the same actions (a
+network's batched convolutions may differ in the last bits, and its episodes with them); a
+stochastic one draws its noise per batch (recorded in the result files' protocol as
+``policy_batch``). On a resume, a group of scenes with any
 episode missing is played again whole and only the missing episodes are recorded.
 
 A policy that can be evaluated this way has ``forward_batch(observations) -> (B, *A) or
@@ -30,10 +32,12 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue
+import threading
 import time
 import traceback
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from functools import partial
 from typing import Any
@@ -48,7 +52,14 @@ from .episode import (
     seed_global_rngs,
 )
 from .errors import BenchError, PolicyOutputError
-from .executor import EpisodeJob, EpisodeOutcome, Executor, render_config, worker_env_vars
+from .executor import (
+    EpisodeJob,
+    EpisodeOutcome,
+    Executor,
+    envs_per_process,
+    render_config,
+    worker_env_vars,
+)
 from .policies import build_policy, policy_chunk_size, reset_policy
 from .protocol import EPISODES_PER_SCENE, BenchmarkConfig
 from .render import apply_environment, check_render_device
@@ -128,24 +139,24 @@ def _torch_tree(x: Any) -> Any:
 
 
 class _LockstepEnv:
-    """An env process's state: one env (rebuilt when the task or settings change), reset
-    and stepped on the parent's command; every reply is ``(kind, payload)``."""
+    """One env of an env process (rebuilt when the task or settings change), reset and
+    stepped on the parent's command; every reply is ``(kind, payload)``."""
 
-    def __init__(self, worker_id: int) -> None:
-        self.worker_id = worker_id
+    def __init__(self, process_index: int) -> None:
+        self.process_index = process_index
         self.env: Any = None
         self.key: Any = None
         self.render: str | None = None
 
-    def run(self, command: tuple[Any, ...]) -> tuple[str, Any]:
+    def run(self, kind: str, payload: Any) -> tuple[str, Any]:
         import torch
 
         try:
-            if command[0] == "reset":
-                _, env_id, config, seed, fresh = command
+            if kind == "reset":
+                env_id, config, seed, fresh = payload
                 if self.key != (env_id, config):
                     self.close()
-                    device = config.render_device_for(self.worker_id)
+                    device = config.render_device_for(self.process_index)
                     self.env = make_benchmark_env(
                         env_id, replace(config, render_device=device, gpu_render_workers=0)
                     )
@@ -153,9 +164,9 @@ class _LockstepEnv:
                     self.render = check_render_device(self.env, device)
                 options = {"reconfigure": True} if fresh else None
                 obs, _ = self.env.reset(seed=int(seed), options=options)
-                info = (int(self.env.max_episode_steps), tuple(self.env.action_space.shape), self.render)
-                return "reset", (_numpy_tree(obs), info)
-            action = torch.from_numpy(command[1]).unsqueeze(0)
+                shape = tuple(self.env.action_space.shape)
+                return "reset", (_numpy_tree(obs), (int(self.env.max_episode_steps), shape, self.render))
+            action = torch.from_numpy(payload).unsqueeze(0)
             device = getattr(self.env.unwrapped, "device", None) or torch.device("cpu")
             obs, reward, terminated, truncated, info = self.env.step(action.to(device))
             success = isinstance(info, dict) and bool(first_value(info.get("success", False)))
@@ -174,52 +185,111 @@ class _LockstepEnv:
         self.env, self.key = None, None
 
 
-def _start_env(worker_id: int) -> _LockstepEnv:
+class _EnvSlots:
+    """The envs of one env process. Several (the default on a GPU) step in threads of their
+    own and render their cameras in one shared pass (`mikasa_envs.render_batcher`): the
+    processes that submit work to one GPU are what limits a pool there (`executor`'s
+    `GPU_ENVS_PER_WORKER`)."""
+
+    def __init__(self, process_index: int, slots: int) -> None:
+        self.envs = [_LockstepEnv(process_index) for _ in range(slots)]
+        self.threads = ThreadPoolExecutor(slots) if slots > 1 else None
+
+    def run(self, command: tuple[str, list[tuple[int, Any]]]) -> list[tuple[str, Any]]:
+        """``(kind, [(slot, payload), ...])`` -> each slot's reply, in that order."""
+        kind, items = command
+        if self.threads is None:
+            return [self.envs[slot].run(kind, payload) for slot, payload in items]
+        from mikasa_envs.render_batcher import participating
+
+        # Every thread joins the render passes before any of them renders: one pass each
+        # step for all of them, not one for the first to get there.
+        joined = threading.Barrier(len(items))
+
+        def one(slot: int, payload: Any) -> tuple[str, Any]:
+            with participating():
+                joined.wait()
+                return self.envs[slot].run(kind, payload)
+
+        futures = [self.threads.submit(one, slot, payload) for slot, payload in items]
+        return [f.result() for f in futures]
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+        if self.threads is not None:
+            self.threads.shutdown(wait=False)
+
+
+def _start_env_slots(process_index: int, slots: int) -> _EnvSlots:
     from mikasa_envs.workers import quiet_worker
 
     quiet_worker(one_raster_thread=False)
-    return _LockstepEnv(worker_id)
+    if slots > 1:
+        from mikasa_envs.render_batcher import install_batcher
+
+        install_batcher()
+    return _EnvSlots(process_index, slots)
 
 
-def _env_main(worker_id: int, inbox: Any, outbox: Any, env_vars: dict[str, str]) -> None:
+def _env_main(
+    process_index: int, slots: int, inbox: Any, outbox: Any, env_vars: dict[str, str]
+) -> None:
     """Entry point of an env process."""
     apply_environment(env_vars)  # before anything can initialise Vulkan
     from mikasa_envs.workers import serve_jobs
 
-    serve_jobs(worker_id, inbox, outbox, partial(_start_env, worker_id))
+    serve_jobs(process_index, inbox, outbox, partial(_start_env_slots, process_index, slots))
 
 
 class _EnvPool:
-    """B spawn-started env processes, commanded together."""
+    """``n`` envs in spawn-started env processes of up to ``per_process`` envs each,
+    commanded together."""
 
-    def __init__(self, n: int, config: BenchmarkConfig) -> None:
+    def __init__(self, n: int, per_process: int, config: BenchmarkConfig) -> None:
         ctx = mp.get_context("spawn")
+        self.per_process = max(1, per_process)
+        n_proc = -(-n // self.per_process)
         self.outbox = ctx.Queue()
-        self.inboxes = [ctx.Queue() for _ in range(n)]
-        self.processes = [
-            ctx.Process(
-                target=_env_main,
-                args=(i, self.inboxes[i], self.outbox, worker_env_vars(config, i, n)),
-                daemon=True,
-                name=f"mikasa-bench-env-{i}",
+        self.inboxes = [ctx.Queue() for _ in range(n_proc)]
+        self.processes = []
+        for index in range(n_proc):
+            slots = min(self.per_process, n - index * self.per_process)
+            env_vars = worker_env_vars(config, index, n_proc)
+            self.processes.append(
+                ctx.Process(
+                    target=_env_main,
+                    args=(index, slots, self.inboxes[index], self.outbox, env_vars),
+                    daemon=True,
+                    name=f"mikasa-bench-envs-{index}",
+                )
             )
-            for i in range(n)
-        ]
         for p in self.processes:
             p.start()
-        self._gather(range(n), "ready")
+        self._gather(range(n_proc), "ready")
 
-    def command(self, commands: Mapping[int, tuple[Any, ...]]) -> dict[int, Any]:
-        """Send each env its command; return each one's payload (raises on an env error)."""
-        for i, c in commands.items():
-            self.inboxes[i].put(c)
-        return self._gather(commands, "done")
+    def command(self, kind: str, payloads: Mapping[int, Any]) -> dict[int, Any]:
+        """Send env ``i`` its payload for ``kind`` (reset or step); each env's reply payload.
+        Raises `_EnvError` when an env failed."""
+        by_process: dict[int, list[tuple[int, Any]]] = {}
+        for i, payload in payloads.items():
+            by_process.setdefault(i // self.per_process, []).append((i % self.per_process, payload))
+        for index, items in by_process.items():
+            self.inboxes[index].put((kind, items))
+        replies = self._gather(by_process, "done")
+        out = {}
+        for index, items in by_process.items():
+            for (slot, _), (got, payload) in zip(items, replies[index], strict=True):
+                if got == "error":
+                    raise _EnvError(index * self.per_process + slot, *payload)
+                out[index * self.per_process + slot] = payload
+        return out
 
     def _gather(self, ids: Any, kind: str) -> dict[int, Any]:
         waiting, out = set(ids), {}
         while waiting:
             try:
-                got, wid, payload = self.outbox.get(timeout=1.0)
+                got, index, payload = self.outbox.get(timeout=1.0)
             except queue.Empty:
                 dead = [i for i in waiting if not self.processes[i].is_alive()]
                 if dead:
@@ -229,11 +299,9 @@ class _EnvPool:
                     ) from None
                 continue
             if got == "fatal":
-                raise BenchError(f"env process {wid} failed to start:\n{payload}")
-            if got == "done" and payload[0] == "error":
-                raise _EnvError(wid, *payload[1])
-            waiting.discard(wid)
-            out[wid] = payload[1] if got == "done" else None
+                raise BenchError(f"env process {index} failed to start:\n{payload}")
+            waiting.discard(index)
+            out[index] = payload
         return out
 
     def close(self, graceful: bool) -> None:
@@ -262,14 +330,22 @@ class LockstepExecutor(Executor):
 
     name = "lockstep"
 
-    def __init__(self, batch: int) -> None:
+    def __init__(self, batch: int, envs_per_worker: int | None = None) -> None:
         if batch < 1:
             raise BenchError(f"--policy-batch must be >= 1, got {batch}")
+        if envs_per_worker is not None and envs_per_worker < 1:
+            raise BenchError(f"--envs-per-worker must be >= 1, got {envs_per_worker}")
         self.batch = int(batch)
+        self.envs_per_worker = envs_per_worker
+        """Envs per env process as asked (None: `envs_per_process` decides by render device)."""
 
     def describe(self) -> dict[str, Any]:
-        """Name and envs in lockstep (the runs' ``policy_batch``)."""
-        return {"name": self.name, "policy_batch": self.batch}
+        """Name, envs in lockstep (the runs' ``policy_batch``) and envs per env process."""
+        return {
+            "name": self.name,
+            "policy_batch": self.batch,
+            "envs_per_worker": self.envs_per_worker or "auto",
+        }
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[EpisodeOutcome]:
         """Yield every job's outcome, a round at a time; always stops the env processes."""
@@ -291,7 +367,7 @@ class LockstepExecutor(Executor):
             for group in pending.values()
             for rounds in scene_groups(next(iter(group.values())).config.n_episodes, self.batch)
         )
-        pool = _EnvPool(widest, config)
+        pool = _EnvPool(widest, envs_per_process(config, 0, self.envs_per_worker), config)
         clean = False
         try:
             for todo in pending.values():
@@ -354,7 +430,7 @@ def _play_round(
     seeds = [job.seed_of(e) for e in episodes]
     n = len(episodes)
     replies = pool.command(
-        {i: ("reset", job.task.env_id, job.config, s, fresh) for i, s in enumerate(seeds)}
+        "reset", {i: (job.task.env_id, job.config, s, fresh) for i, s in enumerate(seeds)}
     )
     obs = [_torch_tree(replies[i][0]) for i in range(n)]
     max_steps, action_shape, render = replies[0][1]
@@ -369,7 +445,7 @@ def _play_round(
             for i in active:
                 queues[i] = deque(chunks[i])
         replies = pool.command(
-            {i: ("step", queues[i].popleft().numpy().astype(np.float32)) for i in active}
+            "step", {i: queues[i].popleft().numpy().astype(np.float32) for i in active}
         )
         for i, (o, reward, ok, _) in replies.items():
             obs[i] = _torch_tree(o)
