@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import tarfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -230,7 +231,7 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
     out = [
         "## Runs\n",
         "| task | policy | dataset (episodes / frames / MB) | training | training wall time "
-        "(calls) | steps/s | device | final loss | eval wall time |",
+        "(calls) | steps/s | device | final loss | eval wall time (how) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for row in t["rows"]:
@@ -251,7 +252,7 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
                 rate = f"{tr['steps_per_s']:.2f}" if tr.get("steps_per_s") else "–"
             else:
                 training, wall, loss, device, rate = "pending", "–", "–", "–", "–"
-            evw = _hms(ev.get("wall_s")) if ev else "–"
+            evw = f"{_hms(ev.get('wall_s'))} ({_eval_spread(ev)})" if ev else "–"
             out.append(
                 f"| {row['task']} | {settings[s]['label']} | {data} | {training} | {wall} | "
                 f"{rate} | {device} | {loss} | {evw} |"
@@ -271,6 +272,17 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
             f"| {row['chance_reason']} |"
         )
     return [*out, ""]
+
+
+def _eval_spread(rec: Mapping[str, Any]) -> str:
+    """How an evaluation ran, from its command: lockstep batches, in-process or workers."""
+    cmd = str(rec.get("command", ""))
+    if m := re.search(r"--policy-batch (\d+)", cmd):
+        return f"lockstep {m.group(1)}"
+    m = re.search(r"--workers (\d+)", cmd)
+    if m is None:
+        return "?"
+    return "in-process" if m.group(1) == "0" else f"{m.group(1)} workers"
 
 
 def _commands(t: Mapping[str, Any], cols: list[tuple[str, str]]) -> list[str]:
