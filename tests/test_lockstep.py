@@ -132,7 +132,9 @@ def test_lockstep_matches_one_episode_at_a_time(tmp_path, policy, envs_per_proce
     assert _run(tmp_path / "batch", target, *extra) == 0
     assert _episodes(tmp_path / "batch") == _episodes(tmp_path / "inline")
     run = json.loads((tmp_path / "batch" / "meta" / "run.json").read_text())
-    assert run["config"]["policy_batch"] == 3
+    assert run["config"]["policy_batch"] == 3 and run["protocol"]["policy_batch"] == 3
+    result = json.loads((tmp_path / "batch" / f"{TASK}.json").read_text())
+    assert result["policy_batch"] == 3
 
 
 def test_lockstep_resume_replays_the_group_and_records_the_missing(tmp_path):

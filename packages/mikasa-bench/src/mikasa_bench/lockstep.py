@@ -4,9 +4,11 @@ policy call per step for all of them.
 A learned policy on a GPU answers B observations in about the time it takes for one, and
 one evaluation episode at a time leaves it waiting on the simulator and the simulator on
 it (a Diffusion Policy evaluated in-process ran 10-20 env steps/s on an H200). With
-``policy_batch = B`` the bench runs B envs in B worker processes in lockstep, as
-lerobot-eval does with its vector envs, and asks the policy once per step for all of them:
-``policy.forward_batch(observations)``.
+``policy_batch = B`` the bench runs B envs in lockstep, as lerobot-eval does with its vector
+envs, and asks the policy (in this process) once per step for all of them:
+``policy.forward_batch(observations)``. The envs live in env processes of up to
+``envs_per_worker`` each (`executor.envs_per_process`: 4 on a GPU, stepped in threads whose
+cameras render in one shared pass; 1 on the CPU).
 
 Which episodes share a batch is fixed by the protocol, never by scheduling, so results
 depend on B alone (not on the machine, a resume or timing): the scenes of a task

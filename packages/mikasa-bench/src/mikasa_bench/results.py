@@ -157,6 +157,7 @@ def build_task_result(
         "include_overlays": config.include_overlays,
         "num_envs": NUM_ENVS,
         "render_device": settings["render_device"],
+        "policy_batch": config.policy_batch,
         "canonical": settings["canonical"],
         "wall_time_s": wall_time_s,
     }
