@@ -64,8 +64,10 @@ def _run(args: argparse.Namespace, out: Path, spread: list[str]) -> dict:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--policy", default=None, help="a bench policy with forward_batch (default: the stand-in)")
-    p.add_argument("--policy-kwargs", default=None, help="JSON, e.g. '{\"device\": \"cuda\"}'")
+    p.add_argument(
+        "--policy", default=None, help="a bench policy with forward_batch (default: the stand-in)"
+    )
+    p.add_argument("--policy-kwargs", default=None, help='JSON, e.g. \'{"device": "cuda"}\'')
     p.add_argument("--policy-ms", type=float, default=20.0, help="the stand-in's delay per call")
     p.add_argument("--task", default="RememberColor3-VLA-v0")
     p.add_argument("--episodes", type=int, default=20)

@@ -146,9 +146,13 @@ def test_lockstep_resume_replays_the_group_and_records_the_missing(tmp_path):
     # Forget episodes 1 and 6 (rounds 1 of the group) as if the run had stopped there.
     (part / f"{TASK}.json").unlink()
     journal = part / "meta" / "episodes.jsonl"
-    lines = [ln for ln in journal.read_text().splitlines() if json.loads(ln)["episode"] not in (1, 6)]
+    lines = [
+        ln for ln in journal.read_text().splitlines() if json.loads(ln)["episode"] not in (1, 6)
+    ]
     journal.write_text("\n".join(lines) + "\n")
     assert cli.main(["run", "--resume", str(part), "--no-progress", "--no-report"]) == 0
     assert _episodes(part) == _episodes(full)
     with pytest.raises(BenchError, match="do not pass --policy-batch"):
-        cli._cmd_run(cli.build_parser().parse_args(["run", "--resume", str(part), "--policy-batch", "2"]))
+        cli._cmd_run(
+            cli.build_parser().parse_args(["run", "--resume", str(part), "--policy-batch", "2"])
+        )

@@ -104,7 +104,12 @@ def split_action_batch(output: Any, batch: int, action_shape: Sequence[int]) -> 
         shape = tuple(arr.shape)
     else:
         shape = tuple(t.shape)
-    if not shape or shape[0] != batch or shape[1:] not in (a, shape[1:2] + a) or len(shape) > len(a) + 2:
+    if (
+        not shape
+        or shape[0] != batch
+        or shape[1:] not in (a, shape[1:2] + a)
+        or len(shape) > len(a) + 2
+    ):
         raise PolicyOutputError(
             f"policy.forward_batch returned {type(output).__name__} of shape {shape} for "
             f"{batch} observations; expected ({batch}, {', '.join(map(str, a))}) or "
@@ -167,7 +172,10 @@ class _LockstepEnv:
                 options = {"reconfigure": True} if fresh else None
                 obs, _ = self.env.reset(seed=int(seed), options=options)
                 shape = tuple(self.env.action_space.shape)
-                return "reset", (_numpy_tree(obs), (int(self.env.max_episode_steps), shape, self.render))
+                return "reset", (
+                    _numpy_tree(obs),
+                    (int(self.env.max_episode_steps), shape, self.render),
+                )
             action = torch.from_numpy(payload).unsqueeze(0)
             device = getattr(self.env.unwrapped, "device", None) or torch.device("cpu")
             obs, reward, terminated, truncated, info = self.env.step(action.to(device))
@@ -396,7 +404,9 @@ class LockstepExecutor(Executor):
                     return
                 except Exception as exc:
                     user = isinstance(exc, BenchError)
-                    yield from _failed(todo, episodes, f"{type(exc).__name__}: {exc}", traceback.format_exc(), user)
+                    yield from _failed(
+                        todo, episodes, f"{type(exc).__name__}: {exc}", traceback.format_exc(), user
+                    )
                     return
                 wall = time.perf_counter() - t0
                 chunk = policy_chunk_size(policy)
@@ -457,7 +467,5 @@ def _play_round(
         active = [i for i in active if not replies[i][3]]
         if not active:
             break
-    results = [
-        EpisodeResult(success[i], total[i], steps[i], seeds[i]) for i in range(n)
-    ]
+    results = [EpisodeResult(success[i], total[i], steps[i], seeds[i]) for i in range(n)]
     return results, render
