@@ -106,6 +106,36 @@ def test_eval_spread(tmp_path: Path) -> None:
     assert given.eval_exec(act) == given.eval_exec(None) == ["--workers", "2"]
 
 
+def test_records_restored_from_the_table(tmp_path: Path) -> None:
+    """Finished records the table JSON holds and <out>/records lacks are written; records
+    already there, unfinished ones and malformed names are left alone."""
+    d = Driver(rb.build_parser().parse_args(["--out", str(tmp_path / "out")]))
+    kept = {"status": "done", "unit": "collect", "task": TASK, "episodes": 7}
+    d.record_path(TASK, "collect").parent.mkdir(parents=True)
+    d.record_path(TASK, "collect").write_text(json.dumps(kept))
+    records = [
+        {"status": "done", "unit": "collect", "task": TASK, "episodes": 200},
+        {"status": "done", "unit": "eval-act", "task": TASK, "successes": 3},
+        {"status": "running", "unit": "train-act", "task": TASK},
+        {"status": "done", "unit": "../x", "task": TASK},
+    ]
+    table = tmp_path / "BASELINES.json"
+    table.write_text(json.dumps({"records": records}))
+    assert bt.restore_records(d, table) == 1
+    assert d.record(TASK, "eval-act") == records[1]
+    assert json.loads(d.record_path(TASK, "collect").read_text()) == kept
+    assert d.record(TASK, "train-act") is None
+    assert bt.restore_records(d, tmp_path / "missing.json") == 0
+
+
+def test_eval_spread_from_the_command() -> None:
+    """The runs table says how each evaluation ran, from its recorded command."""
+    assert bt._eval_spread({"command": "mikasa-bench run --policy-batch 10 --x"}) == "lockstep 10"
+    assert bt._eval_spread({"command": "run --workers 0 --no-report"}) == "in-process"
+    assert bt._eval_spread({"command": "run --workers 5"}) == "5 workers"
+    assert bt._eval_spread({}) == "?"
+
+
 def test_vs_chance() -> None:
     """The verdict compares chance with the record's (mikasa-bench's Wilson) interval."""
     rec = {"status": "done", "sr_ci95": [0.05, 0.3]}
