@@ -52,6 +52,7 @@ __all__ = [
     "LocalExecutor",
     "EXECUTORS",
     "make_executor",
+    "make_worker_env",
     "available_cores",
     "render_config",
 ]
@@ -116,6 +117,14 @@ class EpisodeOutcome:
         )
 
 
+def make_worker_env(env_id: str, config: BenchmarkConfig, process_index: int) -> tuple[Any, str]:
+    """The benchmark env of pool process ``process_index``, rendering on that process's
+    device (`BenchmarkConfig.render_device_for`), and where it really renders."""
+    device = config.render_device_for(process_index)
+    env = make_benchmark_env(env_id, replace(config, render_device=device, gpu_render_workers=0))
+    return env, check_render_device(env, device)
+
+
 class _EpisodeWorker:
     """Per-process worker state: one cached env and the policies built for it.
 
@@ -139,11 +148,10 @@ class _EpisodeWorker:
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
             self.close()
-            device = job.config.render_device_for(self.process_index)
-            config = replace(job.config, render_device=device, gpu_render_workers=0)
-            self.env = make_benchmark_env(job.task.env_id, config)
+            self.env, self.render = make_worker_env(
+                job.task.env_id, job.config, self.process_index
+            )
             self.env_key = job.env_key
-            self.render = check_render_device(self.env, device)
         return self.env
 
     def _policy_for(self, job: EpisodeJob, env: Any) -> Any:

@@ -40,7 +40,6 @@ import traceback
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
 from functools import partial
 from typing import Any
 
@@ -49,7 +48,6 @@ import numpy as np
 from .episode import (
     EpisodeResult,
     first_value,
-    make_benchmark_env,
     normalize_action_chunk,
     seed_global_rngs,
 )
@@ -59,12 +57,13 @@ from .executor import (
     EpisodeOutcome,
     Executor,
     envs_per_process,
+    make_worker_env,
     render_config,
     worker_env_vars,
 )
 from .policies import build_policy, policy_chunk_size, reset_policy
 from .protocol import EPISODES_PER_SCENE, BenchmarkConfig
-from .render import apply_environment, check_render_device
+from .render import apply_environment
 
 __all__ = ["LockstepExecutor", "split_action_batch", "scene_groups"]
 
@@ -163,12 +162,8 @@ class _LockstepEnv:
                 env_id, config, seed, fresh = payload
                 if self.key != (env_id, config):
                     self.close()
-                    device = config.render_device_for(self.process_index)
-                    self.env = make_benchmark_env(
-                        env_id, replace(config, render_device=device, gpu_render_workers=0)
-                    )
+                    self.env, self.render = make_worker_env(env_id, config, self.process_index)
                     self.key = (env_id, config)
-                    self.render = check_render_device(self.env, device)
                 options = {"reconfigure": True} if fresh else None
                 obs, _ = self.env.reset(seed=int(seed), options=options)
                 shape = tuple(self.env.action_space.shape)
@@ -457,7 +452,7 @@ def _play_round(
             for i in active:
                 queues[i] = deque(chunks[i])
         replies = pool.command(
-            "step", {i: queues[i].popleft().numpy().astype(np.float32) for i in active}
+            "step", {i: queues[i].popleft().numpy() for i in active}
         )
         for i, (o, reward, ok, _) in replies.items():
             obs[i] = _torch_tree(o)
