@@ -102,6 +102,9 @@ def test_eval_spread(tmp_path: Path) -> None:
     assert on_gpu.eval_exec(None) == ["--workers", "6"]
     assert on_cpu.eval_exec(act) == on_cpu.eval_exec(None) == ["--workers", "6"]
     assert driver("--eval-batch", "1", device="cuda").eval_exec(act) == ["--workers", "0"]
+    spread = driver("--eval-envs-per-worker", "2", device="cuda")
+    assert spread.eval_exec(act) == ["--policy-batch", "10", "--envs-per-worker", "2"]
+    assert spread.eval_exec(None) == ["--workers", "6"]
     given = driver("--eval-workers", "2", device="cuda")
     assert given.eval_exec(act) == given.eval_exec(None) == ["--workers", "2"]
 
@@ -131,6 +134,8 @@ def test_records_restored_from_the_table(tmp_path: Path) -> None:
 def test_eval_spread_from_the_command() -> None:
     """The runs table says how each evaluation ran, from its recorded command."""
     assert bt._eval_spread({"command": "mikasa-bench run --policy-batch 10 --x"}) == "lockstep 10"
+    batched = {"command": "run --policy-batch 10 --envs-per-worker 2"}
+    assert bt._eval_spread(batched) == "lockstep 10, 2 envs/process"
     assert bt._eval_spread({"command": "run --workers 0 --no-report"}) == "in-process"
     assert bt._eval_spread({"command": "run --workers 5"}) == "5 workers"
     assert bt._eval_spread({}) == "?"

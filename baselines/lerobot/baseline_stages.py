@@ -585,9 +585,15 @@ class Driver:
             return ["--workers", str(self.a.eval_workers)]
         if setting is not None and self.device().startswith("cuda"):
             if self.a.eval_batch > 1:
-                return ["--policy-batch", str(self.a.eval_batch)]
+                return ["--policy-batch", str(self.a.eval_batch), *self.lockstep_envs()]
             return ["--workers", "0"]
         return ["--workers", str(self.a.workers)]
+
+    def lockstep_envs(self) -> list[str]:
+        """``--envs-per-worker`` of a lockstep evaluation, when ``--eval-envs-per-worker``
+        sets it (the bench's default: 4 envs per env process on a GPU)."""
+        n = self.a.eval_envs_per_worker
+        return [] if n is None else ["--envs-per-worker", str(n)]
 
     def evaluate(self, task: str, name: str, setting: Setting | None) -> None:
         """``mikasa-bench run`` of a trained setting (``lerobot:<checkpoint>``) or a reference
@@ -621,7 +627,9 @@ class Driver:
         resume = (part / "meta" / "run.json").is_file()
         if resume:
             argv = bench + ["run", "--resume", str(part), *common]
-            if not _bench_lockstep(part):  # a lockstep run starts its own env processes
+            if _bench_lockstep(part):  # a lockstep run starts its own env processes
+                argv += self.lockstep_envs()
+            else:
                 spread = self.eval_exec(setting)
                 argv += spread if spread[0] == "--workers" else ["--workers", "0"]
         else:

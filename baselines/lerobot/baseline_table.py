@@ -278,7 +278,8 @@ def _eval_spread(rec: Mapping[str, Any]) -> str:
     """How an evaluation ran, from its command: lockstep batches, in-process or workers."""
     cmd = str(rec.get("command", ""))
     if m := re.search(r"--policy-batch (\d+)", cmd):
-        return f"lockstep {m.group(1)}"
+        per = re.search(r"--envs-per-worker (\d+)", cmd)
+        return f"lockstep {m.group(1)}" + (f", {per.group(1)} envs/process" if per else "")
     m = re.search(r"--workers (\d+)", cmd)
     if m is None:
         return "?"

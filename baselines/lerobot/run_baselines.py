@@ -300,6 +300,14 @@ def build_parser() -> argparse.ArgumentParser:
         "one episode at a time, in the bench's own process)",
     )
     number(
+        "--eval-envs-per-worker",
+        int,
+        None,
+        "envs per env process of a lockstep evaluation (mikasa-bench run --envs-per-worker; "
+        "default the bench's: 4 on a GPU, stepped in threads; 1 or 2 spread the B envs of a "
+        "batch over more cores)",
+    )
+    number(
         "--train-workers",
         int,
         min(8, cpus),
