@@ -136,6 +136,8 @@ def test_eval_spread_from_the_command() -> None:
     assert bt._eval_spread({"command": "mikasa-bench run --policy-batch 10 --x"}) == "lockstep 10"
     batched = {"command": "run --policy-batch 10 --envs-per-worker 2"}
     assert bt._eval_spread(batched) == "lockstep 10, 2 envs/process"
+    alone = {"command": "run --policy-batch 10 --envs-per-worker 1"}
+    assert bt._eval_spread(alone) == "lockstep 10, 1 env/process"
     assert bt._eval_spread({"command": "run --workers 0 --no-report"}) == "in-process"
     assert bt._eval_spread({"command": "run --workers 5"}) == "5 workers"
     assert bt._eval_spread({}) == "?"

@@ -217,10 +217,11 @@ def _finding(t: Mapping[str, Any]) -> list[str]:
     if not lines:
         return [*out, "No learned policy has been evaluated yet.\n"]
     summary = ", ".join(f"{n} {k}" for k, n in sorted(counts.items()))
+    so_far = "" if t["done"] == t["total"] else " so far"
     out.append(
         "Does memoryless imitation sit at chance where memory is required? Per task, each "
         "learned policy's interval against chance (memoryless = one frame in, re-planning "
-        f"every step). Memoryless (task, policy) results so far: {summary or 'none'}.\n"
+        f"every step). Memoryless (task, policy) results{so_far}: {summary or 'none'}.\n"
     )
     return [*out, *lines, ""]
 
@@ -253,6 +254,8 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
             else:
                 training, wall, loss, device, rate = "pending", "–", "–", "–", "–"
             evw = f"{_hms(ev.get('wall_s'))} ({_eval_spread(ev)})" if ev else "–"
+            if ev and ev.get("calls", 1) > 1:  # a cut lockstep call replays its rounds
+                evw = evw[:-1] + f"; {ev['calls']} calls)"
             out.append(
                 f"| {row['task']} | {settings[s]['label']} | {data} | {training} | {wall} | "
                 f"{rate} | {device} | {loss} | {evw} |"
@@ -279,7 +282,9 @@ def _eval_spread(rec: Mapping[str, Any]) -> str:
     cmd = str(rec.get("command", ""))
     if m := re.search(r"--policy-batch (\d+)", cmd):
         per = re.search(r"--envs-per-worker (\d+)", cmd)
-        return f"lockstep {m.group(1)}" + (f", {per.group(1)} envs/process" if per else "")
+        if per is None:
+            return f"lockstep {m.group(1)}"
+        return f"lockstep {m.group(1)}, {per.group(1)} env{'' if per.group(1) == '1' else 's'}/process"
     m = re.search(r"--workers (\d+)", cmd)
     if m is None:
         return "?"
