@@ -185,3 +185,8 @@ def run_until(
                     except ProcessLookupError:
                         pass
     return RunResult(None if stop_at is not None else rc, time.monotonic() - t0)
+
+
+def calls_wall_s(calls: Sequence[Mapping[str, Any]]) -> float:
+    """The wall time summed over a unit's calls."""
+    return round(sum(c.get("wall_s", 0) for c in calls), 1)

@@ -1,7 +1,7 @@
 """The units of the LeRobot baseline driver and their records.
 
 One unit = one task's collection, its conversion, one setting's training, or one policy's
-evaluation. Each runs the project's CLI (or ``lerobot_train.py``) as a subprocess under the
+evaluation (`baseline_eval`). Each runs the project's CLI (or ``lerobot_train.py``) as a subprocess under the
 call's time limit, builds its output under a hidden ``.partial`` path (collection and
 conversion: the CLIs' own per-episode / staging-directory protocol), renames it into place
 when complete, and then writes a small JSON record under ``<out>/records/<task>/``: the
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import os
 import re
 import shutil
@@ -31,6 +30,7 @@ from baseline_common import (
     RunResult,
     TimeUp,
     UnitFailed,
+    calls_wall_s,
     dir_size_mb,
     display,
     log,
@@ -40,6 +40,7 @@ from baseline_common import (
     run_until,
     write_json,
 )
+from baseline_eval import EvaluateStage
 from baseline_settings import (
     Setting,
     dataset_name,
@@ -48,9 +49,6 @@ from baseline_settings import (
     model_flags,
     train_flags,
 )
-from mikasa_bench.errors import BenchError
-from mikasa_bench.metrics import wilson_interval
-from mikasa_bench.results import load_run
 
 __all__ = ["Driver", "TRAIN_WRAPPER"]
 
@@ -58,7 +56,6 @@ TRAIN_WRAPPER = HERE / "lerobot_train.py"
 GUESS_STEPS_PER_S = {"cpu": 0.2, "cuda": 5.0}
 """Training steps/s assumed for `Driver.auto_save_freq` until one is measured (low on purpose:
 too frequent checkpoints cost seconds, too rare ones lose training at a stop)."""
-BENCH_INTERRUPTED = 130
 
 
 def _last(run_dir: Path) -> Path:
@@ -69,11 +66,6 @@ def _last(run_dir: Path) -> Path:
 def _step_file(run_dir: Path) -> Path:
     """The step count of a run's last checkpoint (there once the first one is saved)."""
     return _last(run_dir) / "training_state" / "training_step.json"
-
-
-def _wall_s(calls: Sequence[Mapping[str, Any]]) -> float:
-    """The wall time summed over a unit's calls."""
-    return round(sum(c.get("wall_s", 0) for c in calls), 1)
 
 
 def _rate(calls: Sequence[Mapping[str, Any]]) -> float | None:
@@ -137,22 +129,7 @@ def parse_train_log(text: str, start_step: int, log_freq: int) -> dict[str, Any]
     }
 
 
-def _bench_result(run_dir: Path, task: str) -> dict[str, Any] | None:
-    """``task``'s result in a finished ``mikasa-bench run`` directory, or None."""
-    try:
-        results = load_run(run_dir).results
-    except BenchError:
-        return None
-    return next((r for r in results if r.get("env_id") == task), None)
-
-
-def _bench_lockstep(run_dir: Path) -> bool:
-    """Whether a mikasa-bench run directory plays its episodes in lockstep (--policy-batch)."""
-    meta = read_json(run_dir / "meta" / "run.json") or {}
-    return int((meta.get("config") or {}).get("policy_batch", 1)) > 1
-
-
-class Driver:
+class Driver(EvaluateStage):
     """The configured run's layout under ``--out``, its records and its units."""
 
     def __init__(self, args: argparse.Namespace) -> None:
@@ -332,7 +309,7 @@ class Driver:
                 "frames": sum(lengths),
                 "attempts": attempts,
                 "yield": len(seeds) / attempts if attempts else None,
-                "wall_s": _wall_s(calls) if calls else None,
+                "wall_s": calls_wall_s(calls) if calls else None,
                 "calls": len(calls),
                 "command": display(argv) if argv else None,
             },
@@ -555,7 +532,7 @@ class Driver:
                 "sees": setting.sees,
                 "steps": int(args["steps"]),
                 "batch_size": int(args["batch_size"]),
-                "wall_s": _wall_s(calls),
+                "wall_s": calls_wall_s(calls),
                 "steps_per_s": _rate(calls),
                 "calls": len(calls),
                 "call_log": calls,
@@ -571,121 +548,4 @@ class Driver:
         log(
             f"{task}: trained {setting.name}: {rec['steps']} steps in {rec['wall_s']:.0f} s "
             f"({rec['calls']} call(s)), loss {rec['final_loss']}"
-        )
-
-    # ---------------------------------------------------------------- eval
-    def eval_exec(self, setting: Setting | None) -> list[str]:
-        """How ``mikasa-bench run`` spreads an evaluation: ``--workers`` from
-        ``--eval-workers`` when given; else a learned policy on a GPU plays ``--eval-batch``
-        episodes in lockstep with one batched policy call per step (``--policy-batch``),
-        since one episode at a time leaves the GPU waiting and worker processes that each
-        run a copy on one GPU slow each other down (the README's "Evaluate learned policies
-        in batches"); the references run on ``--workers``."""
-        if self.a.eval_workers is not None:
-            return ["--workers", str(self.a.eval_workers)]
-        if setting is not None and self.device().startswith("cuda"):
-            if self.a.eval_batch > 1:
-                return ["--policy-batch", str(self.a.eval_batch), *self.lockstep_envs()]
-            return ["--workers", "0"]
-        return ["--workers", str(self.a.workers)]
-
-    def lockstep_envs(self) -> list[str]:
-        """``--envs-per-worker`` of a lockstep evaluation, when ``--eval-envs-per-worker``
-        sets it (the bench's default: 4 envs per env process on a GPU)."""
-        n = self.a.eval_envs_per_worker
-        return [] if n is None else ["--envs-per-worker", str(n)]
-
-    def evaluate(self, task: str, name: str, setting: Setting | None) -> None:
-        """``mikasa-bench run`` of a trained setting (``lerobot:<checkpoint>``) or a reference
-        policy over ``--eval-episodes`` canonical episodes, into a ``.partial`` run directory."""
-        unit = f"eval-{name}"
-        train_rec = self.record(task, f"train-{name}") if setting else None
-        rec = self.record(task, unit)
-        if rec is not None:
-            stale = rec.get("n_episodes") != self.a.eval_episodes or (
-                train_rec is not None and rec.get("train_finished") != train_rec.get("finished")
-            )
-            if not stale:
-                return
-            raise UnitFailed(
-                f"{task} {unit}: the recorded evaluation has other settings "
-                f"({rec.get('n_episodes')} episodes / another training); remove "
-                f"{rel(self.record_path(task, unit))} and {rel(self.eval_dir(task, name))} to redo it"
-            )
-        if setting is not None:
-            ckpt = self.trained(task, name)
-            if ckpt is None or train_rec is None:
-                raise UnitFailed(f"{task} {unit}: not trained")
-            target = f"lerobot:{ckpt}"  # the bench resolves `last` for its label
-        else:
-            target = name
-        self.check_time(task, unit)
-        final = self.eval_dir(task, name)
-        part = self.partial(final)
-        bench = self.cli(self.python, "mikasa-bench", "mikasa_bench.cli")
-        common = ["--no-progress", "--no-report"]
-        resume = (part / "meta" / "run.json").is_file()
-        if resume:
-            argv = bench + ["run", "--resume", str(part), *common]
-            if _bench_lockstep(part):  # a lockstep run starts its own env processes
-                argv += self.lockstep_envs()
-            else:
-                spread = self.eval_exec(setting)
-                argv += spread if spread[0] == "--workers" else ["--workers", "0"]
-        else:
-            if part.exists():
-                shutil.rmtree(part)
-            argv = bench + ["run", "--task", task, "--policy", target]
-            argv += ["--num-episodes", str(self.a.eval_episodes), "--out", str(part), *common]
-            argv += self.eval_exec(setting)
-            if setting is not None:
-                argv += ["--policy-kwargs", json.dumps({"device": self.device()})]
-            if self.a.render_device:
-                argv += ["--render-device", self.a.render_device]
-        log(f"{task}: evaluate {name} over {self.a.eval_episodes} episodes")
-
-        def tick() -> None:
-            journal = part / "meta" / "episodes.jsonl"
-            if journal.is_file():
-                n = sum(1 for _ in journal.open(encoding="utf-8"))
-                log(f"{task}: evaluate {name}: {n}/{self.a.eval_episodes} episodes")
-
-        res = self.run(task, unit, argv, tick=tick)
-        entry = {"wall_s": round(res.wall_s, 1), "rc": res.rc, "command": display(argv)}
-        calls = self.add_wip(task, unit, entry, fresh=not resume)
-        if res.rc in (None, BENCH_INTERRUPTED):
-            raise TimeUp(f"{task} {unit}: stopped; the next call resumes the run")
-        result = _bench_result(part, task)
-        if res.rc != 0 or result is None:
-            raise self.fail(task, unit, f"mikasa-bench exit {res.rc}")
-        if final.exists():
-            shutil.rmtree(final)
-        part.rename(final)
-        successes = sum(bool(s) for s in result["successes"])
-        n = len(result["successes"])
-        rec = self.save_record(
-            task,
-            unit,
-            {
-                "policy": name,
-                "model": (result.get("model") or {}).get("name"),
-                "n_episodes": n,
-                "successes": successes,
-                "sr": result.get("sr"),
-                "sr_ci95": list(wilson_interval(successes, n)),
-                "mean_return": result.get("mean_return"),
-                "mean_episode_length": result.get("mean_episode_length"),
-                "canonical": result.get("canonical"),
-                "render_device": result.get("render_device"),
-                "wall_s": _wall_s(calls),
-                "calls": len(calls),
-                "result": rel(final / f"{task}.json"),
-                "command": calls[0]["command"],
-                "train_finished": train_rec.get("finished") if train_rec else None,
-            },
-        )
-        lo, hi = rec["sr_ci95"]
-        log(
-            f"{task}: {name}: SR {rec['successes']}/{rec['n_episodes']} [{lo:.0%}, {hi:.0%}] "
-            f"in {rec['wall_s']:.0f} s"
         )

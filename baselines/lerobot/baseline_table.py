@@ -284,7 +284,9 @@ def _eval_spread(rec: Mapping[str, Any]) -> str:
         per = re.search(r"--envs-per-worker (\d+)", cmd)
         if per is None:
             return f"lockstep {m.group(1)}"
-        return f"lockstep {m.group(1)}, {per.group(1)} env{'' if per.group(1) == '1' else 's'}/process"
+        return (
+            f"lockstep {m.group(1)}, {per.group(1)} env{'' if per.group(1) == '1' else 's'}/process"
+        )
     m = re.search(r"--workers (\d+)", cmd)
     if m is None:
         return "?"
