@@ -253,9 +253,12 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
                 rate = f"{tr['steps_per_s']:.2f}" if tr.get("steps_per_s") else "–"
             else:
                 training, wall, loss, device, rate = "pending", "–", "–", "–", "–"
-            evw = f"{_hms(ev.get('wall_s'))} ({_eval_spread(ev)})" if ev else "–"
-            if ev and ev.get("calls", 1) > 1:  # a cut lockstep call replays its rounds
-                evw = evw[:-1] + f"; {ev['calls']} calls)"
+            evw = "–"
+            if ev:
+                how = _eval_spread(ev)
+                if ev.get("calls", 1) > 1:  # a cut lockstep call replays its rounds
+                    how += f"; {ev['calls']} calls"
+                evw = f"{_hms(ev.get('wall_s'))} ({how})"
             out.append(
                 f"| {row['task']} | {settings[s]['label']} | {data} | {training} | {wall} | "
                 f"{rate} | {device} | {loss} | {evw} |"

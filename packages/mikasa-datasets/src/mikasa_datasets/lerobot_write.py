@@ -121,6 +121,7 @@ def write_lerobot(
         use_videos=use_videos,
         vcodec=vcodec,
         default_task=default_task,
+        video_file_size_mb=VIDEO_FILE_SIZE_IN_MB,
         progress=progress,
     )
     _fix_image_stats(root, counts, n_frames)
@@ -199,6 +200,7 @@ def _convert(
         "use_videos": use_videos,
         "vcodec": vcodec,
         "default_task": default_task,
+        "video_file_size_mb": VIDEO_FILE_SIZE_IN_MB,
     }
     report = None if progress is None else (lambda done: progress(done, num_episodes))
     try:

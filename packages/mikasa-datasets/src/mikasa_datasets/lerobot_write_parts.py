@@ -3,9 +3,6 @@ functions use them): writing episodes as one LeRobot dataset with lerobot's publ
 (`_write_part`), the exact camera statistics that replace lerobot's (`_fix_image_stats`),
 reading ahead in a thread (`_prefetch`), and the forked writer processes whose datasets
 lerobot's ``aggregate_datasets`` joins (`_write_in_parts`).
-
-``VIDEO_FILE_SIZE_IN_MB`` stays defined in `lerobot_write` and is read from there at each
-use, so a change of it there (a test's monkeypatch) still applies.
 """
 
 from __future__ import annotations
@@ -127,13 +124,12 @@ def _write_part(
     use_videos: bool,
     vcodec: str,
     default_task: str,
+    video_file_size_mb: float,
     progress: Callable[[int], None] | None,
 ) -> tuple[int, int, dict[str, np.ndarray]]:
-    """Write ``episodes`` as a new LeRobot dataset at ``root`` with lerobot's public API;
-    return ``(episodes, frames, pixel value counts per camera)``."""
-    # VIDEO_FILE_SIZE_IN_MB is lerobot_write's (read there at each call; it imports this module)
-    from mikasa_datasets import lerobot_write
-
+    """Write ``episodes`` as a new LeRobot dataset at ``root`` with lerobot's public API
+    (video files of up to ``video_file_size_mb``); return ``(episodes, frames, pixel value
+    counts per camera)``."""
     cls = lerobot_dataset_class()
     dataset = cls.create(
         repo_id=repo_id,
@@ -150,7 +146,7 @@ def _write_part(
         encoder_queue_maxsize=1_000_000,
         encoder_threads=1,
     )
-    dataset.meta.update_chunk_settings(video_files_size_in_mb=lerobot_write.VIDEO_FILE_SIZE_IN_MB)
+    dataset.meta.update_chunk_settings(video_files_size_in_mb=video_file_size_mb)
     counts = {key: np.zeros((3, 256), dtype=np.int64) for key in CAMERA_KEYS}
     last_task = default_task
     n_eps = n_frames = 0
@@ -339,8 +335,6 @@ def _write_in_parts(
                     del pending[i]
         from lerobot.datasets.aggregate import aggregate_datasets
 
-        from mikasa_datasets import lerobot_write  # its VIDEO_FILE_SIZE_IN_MB, as above
-
         # Its tqdm progress bars go to stderr; a converter reports through ``progress``.
         with _quiet(), contextlib.redirect_stderr(io.StringIO()):
             aggregate_datasets(
@@ -348,7 +342,7 @@ def _write_in_parts(
                 repo_id,
                 roots=parts,
                 aggr_root=root,
-                video_files_size_in_mb=lerobot_write.VIDEO_FILE_SIZE_IN_MB,
+                video_files_size_in_mb=write_kwargs["video_file_size_mb"],
             )
         counts = {key: sum(r[2][key] for r in results.values()) for key in CAMERA_KEYS}
         return (
