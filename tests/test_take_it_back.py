@@ -173,3 +173,36 @@ def test_start_marker_only_in_human_renders(make_env):
     # Step and reward text (RenderStepInfo, RenderRewardInfo) in the top-left corner only.
     assert (frames[1][..., :100, :300, :] != frames[0][..., :100, :300, :]).mean() > 0.01
     np.testing.assert_array_equal(frames[1][..., 300:, 300:, :], frames[0][..., 300:, 300:, :])
+
+
+def test_arrival_hands_over_a_scene_that_does_not_show_the_start(make_env):
+    """The step the cube first enters the target, the cube is set down at the target's near
+    edge and the arm at its rest pose, both at rest: where the push came from (the start
+    row) is no longer in view (DEVIATIONS.md, Fixed #29)."""
+    from mikasa_envs.base_env import ROBOT_INIT_QPOS
+
+    env = make_env(ENV_ID)
+    base = env.unwrapped
+    seen_rows = set()
+    for seed in range(6):
+        obs, _ = env.reset(seed=seed)
+        start, goal = base.initial_pos[0, :2], base.goal_pos[0, :2]
+        seen_rows.add(round(float(torch.floor(start[1] / 0.1))))
+        env.step(ZERO)
+        # As a push leaves it: just inside the disc, on the side facing the start.
+        toward_start = (start - goal) / torch.linalg.norm(start - goal)
+        _place_cube(base, (goal + 0.075 * toward_start).tolist())
+        obs, _, _, _, info = env.step(ZERO)
+        assert bool(info["goal_achieved"][0]) and bool(info["goal_reached_status"][0])
+        cube = base.cube.pose.raw_pose[0]
+        expected = torch.tensor([float(goal[0]) - base.HANDOVER_OFFSET, float(goal[1]), base.CUBE_HALFSIZE])
+        torch.testing.assert_close(cube[:3], expected, atol=1e-5, rtol=0)
+        torch.testing.assert_close(cube[3:], torch.tensor([1.0, 0.0, 0.0, 0.0]), atol=1e-5, rtol=0)
+        # state obs: qpos (9), qvel (9) first.
+        np.testing.assert_allclose(obs[0, :9].numpy(), ROBOT_INIT_QPOS, atol=1e-5)
+        np.testing.assert_allclose(obs[0, 9:18].numpy(), 0.0, atol=1e-6)
+        # Only the first arrival hands over: back in the disc later, the cube stays put.
+        _place_cube(base, (goal + 0.05 * toward_start).tolist())
+        env.step(ZERO)
+        torch.testing.assert_close(base.cube.pose.p[0, :2], goal + 0.05 * toward_start, atol=2e-3, rtol=0)
+    assert len(seen_rows) >= 2

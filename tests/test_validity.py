@@ -172,3 +172,26 @@ def test_validity_rejects_bad_input(tmp_path, capsys):
     bad.write_text(json.dumps([{"tasks": "x", "leak": "y", "evidence": "z", "status": "maybe"}]))
     assert validity.main([str(tmp_path / "zero"), "--out", str(tmp_path / "v.md"), "--leaks", str(bad)]) == 2
     assert "unknown leak status 'maybe'" in capsys.readouterr().err
+
+
+def test_validity_update_keeps_the_rows_of_tasks_not_rerun(tmp_path, capsys):
+    kept, rerun = "RememberColor3-VLA-v0", "ShellGameTouch-VLA-v0"
+    first = tmp_path / "first"
+    _write_run(first / "oracle", "oracle", {kept: [True] * 10, rerun: [True] * 10})
+    _write_run(first / "memoryless", "oracle-memoryless", {kept: [False] * 10, rerun: [True] * 10})
+    out = tmp_path / "docs" / "VALIDITY.md"
+    assert validity.main([str(first), "--out", str(out)]) == 0
+    # After a change to one task: rerun only that task, keep the other row.
+    second = tmp_path / "second"
+    _write_run(second / "memoryless", "oracle-memoryless", {rerun: [False] * 5})
+    assert validity.main([str(second), "--out", str(out), "--update", str(out.with_suffix(".json"))]) == 0
+    assert "2 task(s), 0 flagged" in capsys.readouterr().out
+    data = json.loads(out.with_suffix(".json").read_text())
+    rows = {r["env_id"]: r["policies"] for r in data["tasks"]}
+    assert (rows[kept]["oracle"]["n"], rows[kept]["oracle-memoryless"]["successes"]) == (10, 0)
+    # The rerun task's row is the new runs' alone: its old oracle cell is gone with it.
+    assert [*rows[rerun]] == ["oracle-memoryless"] and rows[rerun]["oracle-memoryless"]["n"] == 5
+    assert data["sources"] == [str(first), str(second)] and any("earlier table" in n for n in data["notes"])
+
+    assert validity.main([str(second), "--out", str(out), "--update", str(tmp_path / "nope.json")]) == 2
+    assert "cannot read the earlier table" in capsys.readouterr().err

@@ -182,14 +182,18 @@ LEAKS: tuple[Leak, ...] = (
         "gripper rest on the side of the target that faces the start, so the frame of the "
         "switch tells the start row, and pulling the cube back the way it came needs no memory",
         evidence="a LeRobot Diffusion Policy trained on 200 oracle demonstrations and fed one "
-        "frame (docs/BASELINES.md, H200 machine): 29/50 = 58 % [44 %, 71 %] against chance 0.35 "
+        "frame (docs/BASELINES.md before the fix, at commit 47667f7; H200 machine): 29/50 = 58 % [44 %, 71 %] against chance 0.35 "
         "(row guess) and the memoryless oracle's 21/50; a probe of the oracle's pushes "
         "(benchmarks/leak_probes/take_it_back_push_side.py, 24 seeds, state obs): the TCP's y "
         "offset from the target at the switch is -0.032..-0.016 (row -1), -0.001..+0.019 "
-        "(row 0), +0.015..+0.041 (row +1)",
-        status="open",
-        fix="none yet: any push approaches the target from the start's side, so closing it "
-        "changes the task (e.g. the robot returned to a fixed pose when the target switches); "
-        "an owner decision, as for Intercept*",
+        "(row 0), +0.015..+0.041 (row +1). After the fix the same probe: the cube's y offset 0 in "
+        "every row and the TCP's the rest pose's (-0.016..+0.025 in every row, from the target's "
+        "own draw); over 50 canonical seeds the oracle 50/50 and the memoryless oracle 23/50 "
+        "(chance 0.35)",
+        status="closed",
+        fix="the step the cube first enters the target, it is set down at rest at the target's near "
+        "edge (0.07 towards the robot from the centre) and the arm is put back in its rest pose: "
+        "every later frame depends on the target alone, drawn independently of the start",
+        reference="packages/mikasa-envs/DEVIATIONS.md, Fixed #29",
     ),
 )

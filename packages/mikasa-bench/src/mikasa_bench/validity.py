@@ -12,9 +12,12 @@ success rate of each with its Wilson 95 % interval, the chance rate
   shows its answer without memory (a leak to find and close).
 
 Writes Markdown (``--out``, e.g. ``docs/VALIDITY.md``) and JSON next to it, with the
-hand-maintained list of leaks (`mikasa_bench.leaks`). Command line::
+hand-maintained list of leaks (`mikasa_bench.leaks`). ``--update`` an earlier JSON keeps its
+rows for the tasks the new directories do not cover (after a change to some tasks, rerun
+only those). Command line::
 
     python -m mikasa_bench.validity RESULT_DIR... [--out docs/VALIDITY.md] [--leaks FILE.json]
+        [--update docs/VALIDITY.json]
 
 (also ``mikasa-bench validity`` where the CLI wires `add_validity_parser`).
 """
@@ -41,6 +44,7 @@ __all__ = [
     "Tally",
     "TaskValidity",
     "collect_tallies",
+    "earlier_tallies",
     "validity_rows",
     "validity_markdown",
     "write_validity",
@@ -61,19 +65,22 @@ ORACLE_MIN_SR = 0.95
 
 @dataclass
 class Tally:
-    """Episode outcomes of one policy on one task, by episode seed (runs merge by seed)."""
+    """Episode outcomes of one policy on one task, by episode seed (runs merge by seed),
+    or the counts of an earlier table (``--update``), whose seeds it does not keep."""
 
     by_seed: dict[int, bool] = field(default_factory=dict)
+    # (episodes, successes) carried over from an earlier table.
+    earlier: tuple[int, int] = (0, 0)
 
     @property
     def n(self) -> int:
         """Episodes."""
-        return len(self.by_seed)
+        return len(self.by_seed) + self.earlier[0]
 
     @property
     def successes(self) -> int:
         """Successful episodes."""
-        return sum(self.by_seed.values())
+        return sum(self.by_seed.values()) + self.earlier[1]
 
     @property
     def sr(self) -> float:
@@ -175,6 +182,26 @@ def collect_tallies(dirs: Iterable[str | Path]) -> tuple[dict[str, dict[str, Tal
                 if repeated:
                     notes.append(f"{run_dir}: {result['env_id']} ({target}): {repeated} seed(s) already counted; kept the first")
     return tallies, notes
+
+
+def earlier_tallies(json_path: str | Path) -> tuple[dict[str, dict[str, Tally]], list[str]]:
+    """(env_id -> policy target -> `Tally`, sources) from a VALIDITY.json written earlier."""
+    try:
+        data = json.loads(Path(json_path).read_text(encoding="utf-8"))
+        tallies = {
+            task["env_id"]: {
+                target: Tally(earlier=(int(cell["n"]), int(cell["successes"])))
+                for target, cell in task["policies"].items()
+                if target in POLICY_COLUMNS and cell["n"]
+            }
+            for task in data["tasks"]
+        }
+    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise BenchError(
+            f"cannot read the earlier table {json_path}: {exc}; expected the VALIDITY.json that "
+            "`mikasa-bench validity` wrote (keys tasks -> env_id, policies -> n, successes)"
+        ) from None
+    return tallies, [str(s) for s in data.get("sources", [])]
 
 
 def _flags(tallies: dict[str, Tally], chance: float) -> list[str]:
@@ -325,18 +352,29 @@ def _load_leaks(path: str | None) -> list[Leak]:
 
 
 def write_validity(
-    dirs: Sequence[str | Path], out: str | Path, leaks_path: str | None = None
+    dirs: Sequence[str | Path], out: str | Path, leaks_path: str | None = None, update: str | Path | None = None
 ) -> tuple[Path, Path, list[TaskValidity]]:
-    """Write ``out`` (Markdown) and ``out`` with suffix ``.json``; returns (md, json, rows)."""
+    """Write ``out`` (Markdown) and ``out`` with suffix ``.json``; returns (md, json, rows).
+
+    ``update``: an earlier VALIDITY.json whose rows stand for the tasks ``dirs`` do not cover.
+    """
     tallies, notes = collect_tallies(dirs)
     if not tallies:
         raise BenchError(f"no results of the policies {', '.join(POLICY_COLUMNS)} under {', '.join(map(str, dirs))}")
     leaks = _load_leaks(leaks_path)
+    sources = [str(d) for d in dirs]
+    if update is not None:
+        earlier, earlier_sources = earlier_tallies(update)
+        notes.append(
+            f"{', '.join(_manifest_order(tallies))}: from {', '.join(sources)}; the other rows from "
+            f"the earlier table ({', '.join(earlier_sources) or update})"
+        )
+        tallies = {**{e: t for e, t in earlier.items() if e not in tallies}, **tallies}
+        sources = [*(s for s in earlier_sources if s not in sources), *sources]
     rows = validity_rows(tallies)
     md_path = Path(out)
     json_path = md_path.with_suffix(".json")
     md_path.parent.mkdir(parents=True, exist_ok=True)
-    sources = [str(d) for d in dirs]
     md_path.write_text(validity_markdown(rows, leaks, notes, sources), encoding="utf-8")
     atomic_write_json(
         json_path,
@@ -364,13 +402,19 @@ def add_validity_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("dirs", nargs="+", metavar="DIR", help="run directories, or directories of runs")
     p.add_argument("--out", default="docs/VALIDITY.md", metavar="PATH", help="Markdown output (JSON goes next to it)")
     p.add_argument("--leaks", default=None, metavar="JSON", help="leaks list to use instead of mikasa_bench.leaks")
+    p.add_argument(
+        "--update",
+        default=None,
+        metavar="JSON",
+        help="an earlier VALIDITY.json: its rows stay for the tasks the DIRs do not cover (theirs replace the rest)",
+    )
     return p
 
 
 def run_validity(args: argparse.Namespace) -> int:
     """The ``validity`` subcommand; returns the exit code (0, or 2 on bad input)."""
     try:
-        md, js, rows = write_validity(args.dirs, args.out, args.leaks)
+        md, js, rows = write_validity(args.dirs, args.out, args.leaks, args.update)
     except BenchError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

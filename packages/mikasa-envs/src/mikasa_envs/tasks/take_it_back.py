@@ -1,5 +1,7 @@
 """TakeItBack: push a cube onto a red target, then, once the target turns purple, back to
-where the cube started (a spot the cameras never show)."""
+where the cube started (a spot the cameras never show). When the cube arrives, it is set
+down at a fixed spot of the target and the arm goes back to its rest pose, so nothing in
+view tells which way the cube came."""
 
 from __future__ import annotations
 
@@ -10,8 +12,9 @@ import sapien
 import torch
 from mani_skill.utils.structs import Actor, Pose
 
-from mikasa_envs.base_env import MikasaVLABaseEnv
+from mikasa_envs.base_env import ROBOT_INIT_QPOS, MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import build_colored_cube, rgba01
+from mikasa_envs.building_blocks.poses import only_rows, positions_to_poses, write_actor_poses
 from mikasa_envs.building_blocks.targets import (
     TARGET_Z,
     SwitchingTarget,
@@ -34,7 +37,11 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
     """**Task Description:** a green cube stands on the table. Push it onto the red/white
     target; once it gets there the target turns purple/white, and the cube must be brought
     back to where it started. The start spot is marked only in human renders (hidden from
-    the policy's cameras, and under the cube at reset): the robot must remember it.
+    the policy's cameras, and under the cube at reset): the robot must remember it. At the
+    step the cube first enters the target, the cube is set down at rest at the target's
+    near edge (HANDOVER_OFFSET towards the robot from its centre) and the arm is put back
+    in its rest pose: otherwise where the push left the cube and the gripper shows the
+    direction it came from (DEVIATIONS.md, Fixed #29).
 
     **Randomizations:** the cube's start s (x ∈ [−0.05, 0.05), y = 0.1·j + [0, 0.05) with
     j ∈ {−1, 0, 1}); the target g (x ∈ [0.20, 0.25), y ∈ [−0.025, 0.025)); arm joint noise.
@@ -65,6 +72,9 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
     PUSH_OFFSET: ClassVar[float] = 0.025
     PULL_OFFSET: ClassVar[float] = 0.03
     REACHED_DIST: ClassVar[float] = 0.03
+    # Where the cube is set down when it first enters the target: this far on the robot's
+    # side (−x) of the target's centre, inside GOAL_RADIUS and within the arm's reach.
+    HANDOVER_OFFSET: ClassVar[float] = 0.07
 
     cube: Actor
 
@@ -129,7 +139,41 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         self.goal_achieved[env_idx] = False
         self.goal_reached_status[env_idx] = False
 
+    # ------------------------------------------------------------- stepping
+    def _after_control_step(self) -> None:
+        super()._after_control_step()
+        # Before this step's evaluate(): the first arrival latches the goal there, and the
+        # observation of this step already shows the handed-over scene.
+        arrived = ~self.goal_reached_status & self._cube_in_goal()
+        if bool(arrived.any()):
+            self._hand_over(arrived.nonzero()[:, 0])
+
+    def _hand_over(self, env_idx: torch.Tensor) -> None:
+        """Set the cube down at rest at the target's near edge and the arm at its rest pose
+        (zero velocity) in the envs ``env_idx``; the start spot is left unseen."""
+        b = len(env_idx)
+        cube_p = self.goal_pos[env_idx].clone()
+        cube_p[:, 0] -= self.HANDOVER_OFFSET
+        cube_p[:, 2] = self.CUBE_HALFSIZE
+        qpos = torch.as_tensor(np.tile(ROBOT_INIT_QPOS, (b, 1)), dtype=torch.float32, device=self.device)
+        if not self.gpu_sim_enabled:
+            write_actor_poses(self.scene, [self.cube], env_idx, positions_to_poses(cube_p)[:, None], zero_velocity=True)
+            self.agent.reset(qpos)
+            return
+        # GPU: after the substeps the buffers still hold the poses from before them (ManiSkill
+        # fetches after this hook): refresh them, write the rows, push everything to PhysX.
+        self.scene._gpu_fetch_all()
+        write_actor_poses(self.scene, [self.cube], env_idx, positions_to_poses(cube_p)[:, None], zero_velocity=True)
+        with only_rows(self.scene, env_idx):
+            self.agent.reset(qpos)
+        self.scene._gpu_apply_all()
+        self.scene.px.gpu_update_articulation_kinematics()
+
     # ---------------------------------------------------------------- queries
+    def _cube_in_goal(self) -> torch.Tensor:
+        """(B,) whether the cube's centre is within GOAL_RADIUS of the target (xy, strict)."""
+        return torch.linalg.norm(self.cube_position()[:, :2] - self.goal_pos[:, :2], dim=-1) < self.GOAL_RADIUS
+
     def cube_position(self) -> torch.Tensor:
         """(B, 3) cube centre."""
         if not self.gpu_sim_enabled:
@@ -141,9 +185,9 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         goal (latched) and the return (``take_it_back.md``, episode logic)."""
         # The colour change shows one step after the goal event (upstream order).
         self.goal.switch(self.goal_achieved)
-        cube_xy = self.cube_position()[:, :2]
-        self.goal_achieved = torch.linalg.norm(cube_xy - self.goal_pos[:, :2], dim=-1) < self.GOAL_RADIUS
+        self.goal_achieved = self._cube_in_goal()
         self.goal_reached_status = self.goal_reached_status | self.goal_achieved
+        cube_xy = self.cube_position()[:, :2]
         is_cube_returned = torch.linalg.norm(cube_xy - self.initial_pos[:, :2], dim=-1) < self.GOAL_RADIUS
         return dict(
             success=is_cube_returned & self.goal_reached_status,
