@@ -365,12 +365,13 @@ def write_validity(
     sources = [str(d) for d in dirs]
     if update is not None:
         earlier, earlier_sources = earlier_tallies(update)
+        earlier_sources = [s for s in earlier_sources if s not in sources]
         notes.append(
             f"{', '.join(_manifest_order(tallies))}: from {', '.join(sources)}; the other rows from "
             f"the earlier table ({', '.join(earlier_sources) or update})"
         )
         tallies = {**{e: t for e, t in earlier.items() if e not in tallies}, **tallies}
-        sources = [*(s for s in earlier_sources if s not in sources), *sources]
+        sources = [*earlier_sources, *sources]
     rows = validity_rows(tallies)
     md_path = Path(out)
     json_path = md_path.with_suffix(".json")
