@@ -2,7 +2,8 @@
 
 They return torch tensors shaped like ManiSkill's ``obs_mode="rgb"`` observation and
 expose the attributes the wrappers read (``task_cue``, ``oracle_info``,
-``cue_steps_per_env``, ...), without any simulation.
+``cue_steps_per_env``, ...), without any simulation. Also the assertion helpers that
+several of the wrapper test files share (`_ref_rpy`, `_changed`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
+from transforms3d.euler import quat2euler
 
 CAM = 16  # camera resolution of the fake (small: the wrappers do not care)
 RENDER_HW = (480, 640)
@@ -138,3 +140,20 @@ class FakeVLAEnv(gym.Env):
         if self.render_dtype == "float":
             return frames.float() / 255.0
         return frames
+
+
+# ----------------------------------------------------------------------------------------
+# assertion helpers shared by the wrapper test files
+# ----------------------------------------------------------------------------------------
+
+
+def _ref_rpy(q_wxyz):
+    return np.array(quat2euler(np.asarray(q_wxyz, np.float64), "sxyz"))
+
+
+def _changed(raw, out, env_index=0, region=None):
+    a, b = raw[env_index], out[env_index]
+    if region is not None:
+        (y0, y1), (x0, x1) = region
+        a, b = a[y0:y1, x0:x1], b[y0:y1, x0:x1]
+    return bool((a != b).any())

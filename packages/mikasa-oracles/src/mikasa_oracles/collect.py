@@ -30,30 +30,46 @@ Resume
     every new episode. Re-running the same command keeps ``train_data_0..n-1`` (checked),
     continues at the seed after the last kept episode and removes stale temporary and
     staged files. One collector per task directory at a time (an advisory lock).
+
+Modules
+    This one plans and commits a task's collection (:func:`collect`); one attempt (the
+    per-worker episode loop) is :mod:`mikasa_oracles.collect_attempts`, the task
+    directory's lock and resume checks :mod:`mikasa_oracles.collect_resume`, the pools
+    :mod:`mikasa_oracles.collect_pools` and the command line :mod:`mikasa_oracles.collect_cli`.
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
-import random
 import sys
 import time
-import traceback
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from mikasa_oracles.collect_attempts import (  # noqa: F401  (re-exported)
+    CONTROL_MODE,
+    REWARD_MODE,
+    SIM_BACKEND,
+    STAGED_PREFIX,
+    AttemptResult,
+    _AttemptRunner,
+    _first,
+    _language,
+    make_collection_env,
+    seed_global_rngs,
+)
 from mikasa_oracles.collect_pools import (
     CollectError,
     CollectionFailed,
     InlinePool,
     ProcessPool,
     RayPool,
+)
+from mikasa_oracles.collect_resume import (  # noqa: F401  (re-exported)
+    _clean_staging,
+    _existing_episodes,
+    locked_directory,
 )
 
 __all__ = [
@@ -88,10 +104,6 @@ DEFAULT_MIN_EPISODE_LENGTH = 10
 MAX_SEED = 2**32 - 1
 """ManiSkill seeds its episode RNG with ``numpy.random.RandomState``: seeds < 2**32."""
 
-CONTROL_MODE = "pd_ee_delta_pose"
-REWARD_MODE = "normalized_dense"
-SIM_BACKEND = "cpu"
-STAGED_PREFIX = "seed_"
 
 EXECUTORS = ("local", "ray")
 """``--executor`` values: local processes, or the actors of a Ray cluster."""
@@ -133,186 +145,6 @@ def default_max_attempts(missing: int) -> int:
     """Attempt budget of one run when ``--max-attempts`` is not given: 10 per missing
     episode, at least 100 (an oracle far below 10 % success is broken, not unlucky)."""
     return max(100, 10 * missing)
-
-
-# --------------------------------------------------------------------------- one attempt
-@dataclass(frozen=True)
-class AttemptResult:
-    """Outcome of one seed. ``staged`` is the staged episode file when ``saved``."""
-
-    seed: int
-    saved: bool
-    reason: str
-    length: int
-    reward_sum: float
-    wall_s: float
-    staged: str | None = None
-    error: str | None = None
-
-
-def _first(value: Any) -> Any:
-    """Element 0 of a batched tensor/array/list, else the value."""
-    if hasattr(value, "reshape"):
-        return value.reshape(-1)[0]
-    if isinstance(value, (list, tuple)):
-        return value[0] if value else None
-    return value
-
-
-def _language(info: Any) -> str:
-    if not isinstance(info, dict):
-        return ""
-    value = info.get("language_instruction")
-    if isinstance(value, (list, tuple, np.ndarray)):
-        value = value[0] if len(value) else ""
-    return value if isinstance(value, str) else ""
-
-
-def seed_global_rngs(seed: int) -> None:
-    """So an oracle drawing from global RNGs still depends only on the episode seed."""
-    import torch
-
-    random.seed(seed)
-    np.random.seed(seed % 2**32)
-    torch.manual_seed(seed)
-
-
-def make_collection_env(env_id: str) -> Any:
-    """The recording env: ``gym.make`` with the dataset's settings + the canonical chain."""
-    import gymnasium as gym
-    import mikasa_envs  # noqa: F401  (registers the envs)
-    from mikasa_wrappers import apply_mikasa_vla_wrappers
-
-    env = gym.make(
-        env_id,
-        num_envs=1,
-        obs_mode="rgb",
-        control_mode=CONTROL_MODE,
-        reward_mode=REWARD_MODE,
-        sim_backend=SIM_BACKEND,
-    )
-    try:
-        return apply_mikasa_vla_wrappers(env)
-    except BaseException:
-        env.close()
-        raise
-
-
-class _AttemptRunner:
-    """Runs attempts of one task: owns one env and its oracle (built on first use)."""
-
-    def __init__(
-        self, env_id: str, staging_dir: str, min_length: int, fallback_language: str
-    ) -> None:
-        self.env_id = env_id
-        self.staging_dir = Path(staging_dir)
-        self.min_length = min_length
-        self.fallback_language = fallback_language
-        self.env: Any = None
-        self.oracle: Any = None
-
-    def _ensure_env(self) -> None:
-        if self.env is None:
-            from mikasa_oracles import make_oracle
-
-            self.env = make_collection_env(self.env_id)
-            self.oracle = make_oracle(self.env)
-
-    def run(self, seed: int) -> AttemptResult:
-        """Roll out ``seed``; stage the episode if it is kept. Errors become ``error``."""
-        t0 = time.perf_counter()
-        try:
-            return self._run(seed, t0)
-        except Exception:
-            # The env may be mid-episode or broken: rebuild it for the next attempt.
-            self.close()
-            return AttemptResult(
-                seed, False, "error", 0, 0.0, time.perf_counter() - t0, error=traceback.format_exc()
-            )
-
-    def _run(self, seed: int, t0: float) -> AttemptResult:
-        from mikasa_datasets.npz import make_episode, write_episode
-        from mikasa_envs.render_batcher import participating
-
-        self._ensure_env()
-        max_steps = int(self.env.max_episode_steps)
-        # The rollout (not the env build or the file write) takes part in shared render
-        # passes when this process runs several envs in threads; else a no-op.
-        with participating():
-            frames, language, success, finished = self._rollout(seed, max_steps)
-        length = len(frames["reward"])
-        reward_sum = float(np.sum(np.asarray(frames["reward"], dtype=np.float32), dtype=np.float64))
-        if not success:
-            reason = "unsuccessful" if finished else "timeout"
-            return AttemptResult(seed, False, reason, length, reward_sum, time.perf_counter() - t0)
-        if length < self.min_length:
-            return AttemptResult(
-                seed, False, "too_short", length, reward_sum, time.perf_counter() - t0
-            )
-        episode = make_episode(
-            rgb=np.stack(frames["rgb"]),
-            proprio=np.stack(frames["proprio"]),
-            action=np.stack(frames["action"]),
-            reward=frames["reward"],
-            success=frames["success"],
-            done=frames["done"],
-            language_instruction=language or self.fallback_language,
-            episode_seed=seed,
-        )
-        staged = self.staging_dir / f"{STAGED_PREFIX}{seed}.npz"
-        write_episode(staged, episode, max_episode_steps=max_steps, min_length=self.min_length)
-        return AttemptResult(
-            seed, True, "saved", length, reward_sum, time.perf_counter() - t0, str(staged)
-        )
-
-    def _rollout(
-        self, seed: int, max_steps: int
-    ) -> tuple[dict[str, list[Any]], str | None, bool, bool]:
-        """Play the attempt: (per-step records, language, success, finished)."""
-        from mikasa_envs.render_batcher import global_rng_section
-
-        env, oracle = self.env, self.oracle
-        # Inside the section: a thread beside this one may be resetting its env, whose
-        # layout is drawn from the (reseeded) global torch RNG.
-        with global_rng_section():
-            seed_global_rngs(seed)
-        # A fresh scene: after a plain reset the episode would depend, in the last bits, on
-        # the attempts this worker ran before (PhysX contact caches).
-        obs, info = env.reset(seed=seed, options={"reconfigure": True})
-        oracle.reset()
-        language = _language(info)
-        frames: dict[str, list[Any]] = {
-            k: [] for k in ("rgb", "proprio", "action", "reward", "success", "done")
-        }
-        success = finished = False
-        for _ in range(max_steps):
-            # Observation o_t before the step (copied: the env may reuse its buffers).
-            frames["rgb"].append(obs["rgb"][0].cpu().numpy().copy())
-            frames["proprio"].append(obs["proprio"][0].cpu().numpy().copy())
-            # Stored and executed action are the same clipped float32 vector.
-            action = np.clip(
-                np.asarray(oracle.forward(obs), dtype=np.float32).reshape(-1), -1.0, 1.0
-            )
-            obs, reward, terminated, truncated, info = env.step(action)
-            language = language or _language(info)
-            success = bool(_first(info["success"]))
-            finished = success or bool(_first(terminated)) or bool(_first(truncated))
-            frames["action"].append(action)
-            frames["reward"].append(float(_first(reward)))
-            frames["success"].append(int(success))
-            frames["done"].append(int(finished))
-            if finished:
-                break
-        return frames, language, success, finished
-
-    def close(self) -> None:
-        """Close the env (the next attempt builds a fresh one)."""
-        if self.env is not None:
-            try:
-                self.env.close()
-            except Exception:
-                pass
-        self.env = self.oracle = None
 
 
 # --------------------------------------------------------------------------- the collection
@@ -370,74 +202,6 @@ class CollectionSummary:
                 f"{self.episodes_per_min:.1f} episodes/min with {self.workers} worker(s)",
             ]
         )
-
-
-@contextmanager
-def locked_directory(directory: Path) -> Iterator[None]:
-    """Exclusive advisory lock on the task directory: two collectors into one directory
-    would interleave indices."""
-    fd = os.open(directory, os.O_RDONLY)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise CollectError(f"another mikasa-collect is writing to {directory}") from None
-        yield
-    finally:
-        os.close(fd)
-
-
-def _clean_staging(staging: Path) -> None:
-    """Remove this collector's staged and temporary files, then empty staging dirs."""
-    from mikasa_datasets.npz import is_temp_file
-
-    if staging.is_dir():
-        for p in staging.iterdir():
-            if p.is_file() and (
-                is_temp_file(p) or (p.name.startswith(STAGED_PREFIX) and p.suffix == ".npz")
-            ):
-                p.unlink(missing_ok=True)
-    for d in (staging, staging.parent):
-        try:
-            d.rmdir()  # only if empty: other tasks may be staging next to us
-        except OSError:
-            pass
-
-
-def _existing_episodes(directory: Path, env_id: str, start_seed: int) -> list[Any]:
-    """Check the episodes already in ``directory`` and return their summaries (resume)."""
-    from mikasa_datasets.npz import (
-        METADATA_FILENAME,
-        EpisodeFormatError,
-        read_metadata,
-        summarize_directory,
-    )
-
-    try:
-        existing = summarize_directory(directory)
-    except EpisodeFormatError as exc:
-        raise CollectError(
-            f"cannot resume: {exc}. Delete that file and every later train_data_<i>.npz "
-            f"(they are re-collected identically), or use another --out"
-        ) from None
-    if (directory / METADATA_FILENAME).exists():
-        try:
-            meta_env = read_metadata(directory)["env_id"]
-        except ValueError:
-            meta_env = env_id  # unreadable metadata is rewritten below
-        if meta_env != env_id:
-            raise CollectError(f"{directory} holds episodes of {meta_env!r}, not {env_id!r}")
-    seeds = [e.episode_seed for e in existing]
-    if any(b <= a for a, b in zip(seeds, seeds[1:], strict=False)):
-        raise CollectError(
-            f"cannot resume: episode seeds in {directory} are not increasing: {seeds}"
-        )
-    if seeds and seeds[0] < start_seed:
-        raise CollectError(
-            f"cannot resume: {directory} was collected from seed {seeds[0]} or lower, but "
-            f"--start-seed is {start_seed}; pass --start-seed {seeds[0]} or use another --out"
-        )
-    return existing
 
 
 def open_pool(

@@ -15,6 +15,7 @@ poses); further ``evaluate()`` calls in the same step only report, so reading th
 twice does not advance the machine.
 
 There is no cue or delay phase: ``action_mask`` is always true, ``cue_mask`` always false.
+The scene's fixed layout constants and ``slot_offsets`` live in ``_batteries_checker_layout.py``.
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ from mikasa_envs.building_blocks.buttons import (
     RELEASED_DEPTH,
     Button,
 )
-from mikasa_envs.building_blocks.cubes import rgba01
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import (
     HIDE_OFFSET_Z,
@@ -43,26 +43,14 @@ from mikasa_envs.building_blocks.poses import (
     write_actor_poses,
     zero_actor_velocities,
 )
-
-# +90° about z: the tray, socket, lamp and button are all turned by it.
-YAW_90_QUAT = (float(np.cos(np.pi / 4)), 0.0, 0.0, float(np.sin(np.pi / 4)))
-# ManiSkill's Panda grasp test: at least this force on each finger, within this angle of its
-# opening direction. Batteries farther than the radius from the TCP cannot touch both fingers.
-GRASP_MIN_FORCE = 0.5
-GRASP_MAX_ANGLE_DEG = 85.0
-GRASP_CANDIDATE_RADIUS = 0.12
-
-
-def _material(rgba: tuple[int, ...]) -> sapien.render.RenderMaterial:
-    return sapien.render.RenderMaterial(base_color=list(rgba01(rgba)))
-
-
-def slot_offsets(num_slots: int = 15) -> np.ndarray:
-    """(num_slots, 2) slot xy relative to the tray centre (§3.1): row r = i // 3, column c = i % 3,
-    x = 0.05 − 0.05·c, y = −0.104 + 0.052·r."""
-    i = np.arange(num_slots)
-    rows, cols = i // 3, i % 3
-    return np.stack([0.05 - 0.05 * cols, -0.104 + 0.052 * rows], axis=1)
+from mikasa_envs.tasks._batteries_checker_layout import (
+    GRASP_CANDIDATE_RADIUS,
+    GRASP_MAX_ANGLE_DEG,
+    GRASP_MIN_FORCE,
+    YAW_90_QUAT,
+    _material,
+    slot_offsets,
+)
 
 
 class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):

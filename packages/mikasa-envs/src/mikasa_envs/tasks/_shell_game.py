@@ -17,6 +17,10 @@ family share the scene, the slot draw, the phase clock and the success/reward he
 Phase clock: C = ``cue_steps_per_env``, S = ``empty_steps_per_env`` (the shuffle length; 0
 without a shuffle); the action phase starts at frame C + S. Success is always gated on the
 action phase (the reference did this only in the dense reward modes, §1).
+
+The fixed layout (slots, mug orientations, balls, swap schedule, lamp colours) lives in
+``_shell_game_layout.py`` and the TouchMug / RedBall / GoalSite mixins in
+``_shell_game_mixins.py``; both are re-exported here.
 """
 
 from __future__ import annotations
@@ -28,46 +32,30 @@ from typing import Any, ClassVar
 import numpy as np
 import sapien
 import torch
-from mani_skill.utils.building import actors as actor_builders
 from mani_skill.utils.structs import Actor
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
-from mikasa_envs.building_blocks.cubes import rgba01
 from mikasa_envs.building_blocks.cups import build_mug, mug_rest_height
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, write_actor_poses
-
-NUM_SLOTS = 3
-MUG_NAMES = ("mug_left", "mug_center", "mug_right")
-SLOT_NAMES = ("Left", "Center", "Right")
-# The shuffle's draws (``ScriptedShellGameVLABaseEnv``), which only the families with a
-# shuffle hold: their TASK_STATE.
-SHUFFLE_TASK_STATE = ("shuffle_steps_per_env", "num_swaps_per_env", "steps_per_swap_per_env", "swap_pairs", "slot_of_mug")
-
-
-def normalized_quat(wxyz: Sequence[float]) -> tuple[float, float, float, float]:
-    """``wxyz`` scaled to unit length."""
-    q = np.asarray(wxyz, dtype=np.float64)
-    return tuple(float(v) for v in q / np.linalg.norm(q))  # type: ignore[return-value]
-
-
-# Upside down, handle toward world (0.6, 0.8, 0): the reference's (0, 1, 0.5, 0), normalised.
-MUG_QUAT_HANDLE_AWAY = normalized_quat((0.0, 1.0, 0.5, 0.0))
-# Upside down, handle toward world (−0.724, 0.690, 0), i.e. toward the robot (Pick).
-MUG_QUAT_HANDLE_TOWARD_ROBOT = normalized_quat((0.0, 1.0, 2.5, 0.0))
-
-
-def build_ball(scene: Any, name: str, rgba255: Sequence[int], radius: float) -> Actor:
-    """A visual-only kinematic sphere (no collision), parked out of sight (shared §4, recommended)."""
-    return actor_builders.build_sphere(
-        scene,
-        radius=radius,
-        color=list(rgba01(rgba255)),
-        name=name,
-        body_type="kinematic",
-        add_collision=False,
-        initial_pose=sapien.Pose(p=[0, 0, HIDE_OFFSET_Z]),
-    )
+from mikasa_envs.tasks._shell_game_layout import (  # noqa: F401  (re-exported)
+    BALL_COLORS,
+    LAMP_BULBS,
+    MUG_NAMES,
+    MUG_QUAT_HANDLE_AWAY,
+    MUG_QUAT_HANDLE_TOWARD_ROBOT,
+    NUM_SLOTS,
+    SHUFFLE_TASK_STATE,
+    SLOT_NAMES,
+    build_ball,
+    normalized_quat,
+    swap_schedule,
+)
+from mikasa_envs.tasks._shell_game_mixins import (  # noqa: F401  (re-exported)
+    GoalSiteMixin,
+    RedBallMixin,
+    TouchMugMixin,
+)
 
 
 class ShellGameVLABaseEnv(MikasaVLABaseEnv):
@@ -233,105 +221,7 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
         return 1 - torch.tanh(5 * torch.linalg.norm(self.arm_qvel, dim=-1))
 
 
-# ---------------------------------------------------------------------------- touch rules
-class TouchMugMixin:
-    """Success, reward and state of the touch-the-ball-mug families (Touch, ShuffleTouch).
-
-    The target is mug t (``cup_with_ball_number``), wherever it stands. Success: the TCP
-    within ``GOAL_THRESH`` of its centre, the arm static, no mug moved more than
-    ``MUG_DISPLACEMENT_SUCCESS_THRESH`` in xy from its action-phase slot, action phase.
-    """
-
-    MUG_DISPLACEMENT_PENALTY_COEF: ClassVar[float] = 0.1
-    MUG_DISPLACEMENT_SUCCESS_THRESH: ClassVar[float] = 0.05
-    DENSE_REWARD_MAX = 3.0
-    TASK_STATE = ("_target_mug_pose",)
-
-    def evaluate(self) -> dict:
-        """Placed, static, mug displacement and success (gated on the action phase)."""
-        poses = self.actor_raw_poses(self.mugs)
-        rows = torch.arange(self.num_envs, device=self.device)
-        target = poses[rows, self.cup_with_ball_number.long(), :3]
-        obj_to_goal_pos = target - self.read_tcp_pose()[:, :3]
-        in_action = self.in_action_phase()
-        shift = torch.linalg.norm(poses[..., :2] - self.final_positions[..., :2], dim=-1).max(dim=-1).values
-        mug_max_displacement = torch.where(in_action, shift, torch.zeros_like(shift))
-        is_obj_placed = torch.linalg.norm(obj_to_goal_pos, dim=-1) <= self.GOAL_THRESH
-        is_robot_static = self.is_robot_static()
-        is_mug_displacement_ok = mug_max_displacement <= self.MUG_DISPLACEMENT_SUCCESS_THRESH
-        self._target_mug_pose = poses[rows, self.cup_with_ball_number.long()]
-        return dict(
-            obj_to_goal_pos=obj_to_goal_pos,
-            is_obj_placed=is_obj_placed,
-            is_robot_static=is_robot_static,
-            mug_max_displacement=mug_max_displacement,
-            is_mug_displacement_ok=is_mug_displacement_ok,
-            success=is_obj_placed & is_robot_static & is_mug_displacement_ok & in_action,
-        )
-
-    def _get_obs_extra(self, info: dict) -> dict:
-        obs = dict(tcp_pose=self._tcp_pose)
-        if self.obs_mode in ("state", "state_dict"):
-            obs["obj_pose"] = self._target_mug_pose
-            obs["ball_pose"] = self.ball_pose()
-            obs["oracle_info"] = self.oracle_info
-        return obs
-
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        """(reaching + static·placed + still·placed − shift penalty) in the action phase; 3 on success."""
-        distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
-        reaching = 1 - torch.tanh(5 * distance)
-        static = self.static_reward()
-        placed = info["is_obj_placed"].float()
-        still = info["is_robot_static"].float()
-        penalty = self.MUG_DISPLACEMENT_PENALTY_COEF * torch.tanh(10 * info["mug_max_displacement"])
-        reward = (reaching + static * placed + still * placed - penalty) * self.in_action_phase().float()
-        reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
-        self._reward_dict = {
-            "reaching_reward": reaching,
-            "static_reward": static,
-            "tcp_to_obj_dist": distance,
-            "mug_max_displacement": info["mug_max_displacement"],
-            "mug_shift_penalty": penalty,
-            "is_mug_displacement_ok": info["is_mug_displacement_ok"],
-            "is_obj_placed": info["is_obj_placed"],
-        }
-        return reward
-
-
 # ------------------------------------------------------------- Touch / Push / Pick
-class RedBallMixin:
-    """The red ball of Touch, Push, Pick and Shuffle, hidden under mug t
-    (``cup_with_ball_number``, drawn per episode); ``oracle_info`` is the slot mug t stands
-    in during the action phase."""
-
-    BALL_RGBA: ClassVar[tuple[int, int, int, int]] = (255, 0, 0, 255)
-    TASK_STATE = ("cup_with_ball_number",)
-
-    def _load_task_objects(self) -> None:
-        self.red_ball = build_ball(self.scene, "red_ball", self.BALL_RGBA, self.BALL_RADIUS)
-        self.cup_with_ball_number = torch.zeros(self.num_envs, dtype=torch.uint8, device=self.device)
-
-    def _sample_answer(self, env_idx: torch.Tensor) -> None:
-        self.cup_with_ball_number[env_idx] = self._draw_slot_choice(env_idx).to(torch.uint8)
-
-    def _on_episode_start(self, env_idx: torch.Tensor) -> None:
-        rows = torch.arange(self.num_envs, device=self.device)
-        self.oracle_info = self.final_slot_of_mug[rows, self.cup_with_ball_number.long()].to(torch.uint8)
-        super()._on_episode_start(env_idx)
-
-    def target_mug_pose(self) -> torch.Tensor:
-        """(B, 7) raw pose of mug t, the one hiding the ball."""
-        if not self.gpu_sim_enabled:
-            return self.actor_raw_poses([self.mugs[int(self.cup_with_ball_number[0])]])[:, 0]
-        rows = torch.arange(self.num_envs, device=self.device)
-        return self.actor_raw_poses(self.mugs)[rows, self.cup_with_ball_number.long()]
-
-    def ball_pose(self) -> torch.Tensor:
-        """(B, 7) raw pose of the red ball."""
-        return self.actor_raw_poses([self.red_ball])[:, 0]
-
-
 class HiddenBallShellGameVLABaseEnv(RedBallMixin, ShellGameVLABaseEnv):
     """Touch, Push, Pick: a red ball under one of three dynamic mugs.
 
@@ -405,37 +295,6 @@ class HiddenBallShellGameVLABaseEnv(RedBallMixin, ShellGameVLABaseEnv):
         ball = torch.cat([mug[:, :2], torch.full_like(mug[:, :1], self.BALL_ON_TABLE_Z)], dim=1)
         poses = torch.cat([ball, torch.tensor([1.0, 0, 0, 0], device=self.device).expand(len(ball), 4)], dim=1)
         return self._write_poses([self.red_ball], follow, poses[:, None], zero_velocity=False)
-
-
-class GoalSiteMixin:
-    """An invisible-to-the-policy goal sphere (human renders only), placed at episode start."""
-
-    GOAL_SITE_RADIUS: ClassVar[float]
-    GOAL_SITE_RGBA: ClassVar[tuple[int, int, int, int]] = (0, 255, 0, 255)
-    TASK_STATE = ("goal_pos",)
-
-    def _build_goal_site(self) -> None:
-        self.goal_site = actor_builders.build_sphere(
-            self.scene,
-            radius=self.GOAL_SITE_RADIUS,
-            color=list(rgba01(self.GOAL_SITE_RGBA)),
-            name="goal_site",
-            body_type="kinematic",
-            add_collision=False,
-            initial_pose=sapien.Pose(p=[0, 0, HIDE_OFFSET_Z]),
-        )
-        # ManiSkill hides these from the sensor cameras and shows them in human renders.
-        self._hidden_objects.append(self.goal_site)
-        self.goal_pos = torch.zeros(self.num_envs, 3, device=self.device)
-
-    def _place_goal_site(self, env_idx: torch.Tensor, positions: torch.Tensor) -> None:
-        self.goal_pos[env_idx] = positions
-        poses = torch.zeros(self.num_envs, 1, 7, device=self.device)
-        poses[:, 0, :3] = self.goal_pos
-        poses[:, 0, 3] = 1.0
-        mask = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        mask[env_idx] = True
-        self._write_poses([self.goal_site], mask, poses, zero_velocity=False)
 
 
 # ---------------------------------------------------- ColorLamp / Shuffle / ShuffleColorLamp
@@ -558,36 +417,7 @@ class ScriptedShellGameVLABaseEnv(ShellGameVLABaseEnv):
         return False
 
 
-def swap_schedule(pairs: torch.Tensor, num_swaps: torch.Tensor) -> torch.Tensor:
-    """(b, N_max + 1, 3) slot of each mug after i swaps; rows beyond N repeat row N.
-
-    ``pairs`` (b, N_max, 2) are slot pairs: swap i exchanges the two mugs standing in them.
-    """
-    b, n_max, _ = pairs.shape
-    current = torch.arange(NUM_SLOTS, device=pairs.device).repeat(b, 1)
-    schedule = [current]
-    for i in range(n_max):
-        a, c = pairs[:, i, 0:1], pairs[:, i, 1:2]
-        swapped = torch.where(current == a, c, torch.where(current == c, a, current))
-        current = torch.where((i < num_swaps)[:, None], swapped, current)
-        schedule.append(current)
-    return torch.stack(schedule, dim=1)
-
-
 # -------------------------------------------------------------------- colour lamp
-LAMP_BULBS: dict[str, tuple[tuple[int, int, int], float]] = {
-    "white": ((255, 255, 255), 0.0),
-    "red": ((255, 0, 0), 2.0),
-    "green": ((0, 255, 0), 2.0),
-    "blue": ((0, 0, 255), 2.0),
-}
-BALL_COLORS: dict[str, tuple[int, int, int, int]] = {
-    "ball_red": (255, 0, 0, 255),
-    "ball_green": (0, 255, 0, 255),
-    "ball_blue": (0, 0, 255, 255),
-}
-
-
 class ColorLampShellGameVLABaseEnv(ScriptedShellGameVLABaseEnv):
     """ColorLamp families: red, green and blue balls at slots 0, 1, 2 during the cue, then
     hidden; a lamp behind the centre slot is white until the action phase, then shows

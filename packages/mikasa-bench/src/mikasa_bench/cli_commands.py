@@ -1,0 +1,123 @@
+"""The ``list``, ``report``, ``compare`` and ``serve`` subcommands of ``mikasa-bench``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from .cli_run import _eprint, _parse_kwargs
+from .errors import BenchError
+
+# ------------------------------------------------------------------------------------
+# list
+# ------------------------------------------------------------------------------------
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from mikasa_oracles import has_oracle
+
+    from .report import _format_rows
+    from .tasks import registered_env_ids, select_benchmark_tasks
+
+    tasks = select_benchmark_tasks(split=args.split)
+    if args.memory_type:
+        known = sorted({t.memory_type for t in tasks})
+        if args.memory_type not in known:
+            raise BenchError(
+                f"unknown memory type {args.memory_type!r}; expected one of {', '.join(known)}"
+            )
+        tasks = [t for t in tasks if t.memory_type == args.memory_type]
+    registered = registered_env_ids()
+    rows = []
+    for t in tasks:
+        reg = t.env_id in registered
+        if args.registered_only and not reg:
+            continue
+        rows.append(
+            [
+                t.env_id,
+                t.split.title(),
+                t.memory_type,
+                str(t.max_episode_steps),
+                "yes" if reg else "no",
+                "yes" if has_oracle(t.env_id) else "no",
+            ]
+        )
+    print(
+        _format_rows(
+            ["Env id", "Split", "Memory type", "Max steps", "Registered", "Oracle"], rows, right={3}
+        )
+    )
+    n_reg = sum(r[4] == "yes" for r in rows)
+    print(f"\n{len(rows)} task(s), {n_reg} registered")
+    return 0
+
+
+# ------------------------------------------------------------------------------------
+# report / compare
+# ------------------------------------------------------------------------------------
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .reference import is_reference
+    from .report import text_table, write_report
+    from .results import load_run
+
+    if not args.out and any(is_reference(d) for d in args.dirs):
+        raise BenchError("reference result sets are read-only: give --out DIR for the report")
+    runs = [load_run(d) for d in args.dirs]
+    labels = [r.label for r in runs]
+    if len(set(labels)) != len(labels):
+        # Same policy in several dirs: tell them apart by directory name.
+        for r in runs:
+            r.label = f"{r.label} ({r.run_dir.name})"
+    if args.out:
+        out = Path(args.out)
+    elif len(runs) == 1:
+        out = runs[0].run_dir
+    else:
+        out = Path(os.path.commonpath([str(r.run_dir.resolve()) for r in runs]))
+    print(text_table(runs))
+    md, html_path = write_report(runs, out, title=args.title)
+    print(f"\nreport: {md}\n        {html_path}")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .compare import compare_runs, format_comparison
+    from .results import load_run
+
+    a, b = load_run(args.dir_a), load_run(args.dir_b)
+    if a.label == b.label:
+        a.label, b.label = f"A: {a.label}", f"B: {b.label}"
+    try:
+        comp = compare_runs(a, b, alpha=args.alpha)
+    except ValueError as exc:
+        raise BenchError(str(exc)) from None
+    print(format_comparison(comp))
+    return 1 if comp.regressions else 0
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import logging
+
+    from .policies import resolve_policy
+    from .remote import PolicyServer
+
+    spec = resolve_policy(args.policy, _parse_kwargs(args.policy_kwargs))
+    server = PolicyServer(spec, host=args.host, port=args.port)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    logging.getLogger("websockets").setLevel(logging.WARNING)
+
+    def ready(s: PolicyServer) -> None:
+        _eprint(
+            f"serving policy {spec.label or spec.target!r} on {args.host}:{s.port}; "
+            f"evaluate it with: mikasa-bench run --policy ws://HOST:{s.port} ... (Ctrl-C stops)"
+        )
+
+    try:
+        server.serve_forever(on_ready=ready)
+    except KeyboardInterrupt:
+        _eprint("stopped")
+    return 0
