@@ -156,18 +156,16 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         cube_p[:, 0] -= self.HANDOVER_OFFSET
         cube_p[:, 2] = self.CUBE_HALFSIZE
         qpos = torch.as_tensor(np.tile(ROBOT_INIT_QPOS, (b, 1)), dtype=torch.float32, device=self.device)
-        if not self.gpu_sim_enabled:
-            write_actor_poses(self.scene, [self.cube], env_idx, positions_to_poses(cube_p)[:, None], zero_velocity=True)
-            self.agent.reset(qpos)
-            return
-        # GPU: after the substeps the buffers still hold the poses from before them (ManiSkill
-        # fetches after this hook): refresh them, write the rows, push everything to PhysX.
-        self.scene._gpu_fetch_all()
+        if self.gpu_sim_enabled:
+            # After the substeps the GPU buffers still hold the data from before them (ManiSkill
+            # fetches after this hook): refresh them before writing rows into them.
+            self.scene._gpu_fetch_all()
         write_actor_poses(self.scene, [self.cube], env_idx, positions_to_poses(cube_p)[:, None], zero_velocity=True)
-        with only_rows(self.scene, env_idx):
+        with only_rows(self.scene, env_idx):  # GPU: these envs' rows only (CPU: one env)
             self.agent.reset(qpos)
-        self.scene._gpu_apply_all()
-        self.scene.px.gpu_update_articulation_kinematics()
+        if self.gpu_sim_enabled:
+            self.scene._gpu_apply_all()
+            self.scene.px.gpu_update_articulation_kinematics()
 
     # ---------------------------------------------------------------- queries
     def _cube_in_goal(self) -> torch.Tensor:
