@@ -1,0 +1,54 @@
+"""What a BunchOfColors / SeqOfColors / ChainOfColors PPO state policy does per episode:
+how many of the shown cubes it touched, how many others, how near the button it came, and
+whether it pressed it (success needs exactly the shown cubes touched, then a press).
+
+    python legacy/rl/baselines/diagnose_bunch_of_colors.py CKPT [--env-id BunchOfColors3-v0] [--episodes 8]
+
+CKPT: a ``ppo_memtasks.py`` state checkpoint (``ckpt_*.pt`` or ``final_ckpt.pt``). Deterministic
+actions, dense reward mode, seeds 100.. (not the canonical evaluation seeds). Prints one line
+per episode.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import torch
+from mikasa_robo_rl.agents import flatten_state_obs, load_agent
+from mikasa_robo_rl.vector_env import SubEnvSpec
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("checkpoint", help="a ppo_memtasks.py state checkpoint")
+    parser.add_argument("--env-id", default="BunchOfColors3-v0", help="an RL colour-set id (default BunchOfColors3-v0)")
+    parser.add_argument("--episodes", type=int, default=8, help="episodes (default 8)")
+    args = parser.parse_args()
+    agent = load_agent(args.checkpoint)
+    env = SubEnvSpec(args.env_id, mode="state", reward_mode="dense").make()
+    targets = len(env.unwrapped.true_color_indices[0]) if hasattr(env.unwrapped, "true_color_indices") else "?"
+    for episode in range(args.episodes):
+        obs, _ = env.reset(seed=100 + episode)
+        correct = wrong = 0
+        pressed = False
+        nearest_button = float("inf")
+        for _ in range(env.unwrapped.spec.max_episode_steps or 120):
+            with torch.no_grad():
+                action = agent.get_action(flatten_state_obs(obs), deterministic=True)
+            obs, _, _, truncated, info = env.step(action)
+            terms = info.get("reward_dict")
+            if terms is not None:  # the previous step's terms (upstream order)
+                correct = max(correct, int(terms["correct_touches"][0]))
+                wrong = max(wrong, int(terms["wrong_touches"][0]))
+            if "xy_dist_to_button" in info:
+                nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
+            pressed |= bool(info["button_pressed"][0]) if "button_pressed" in info else False
+            if bool(truncated[0]):
+                break
+        print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
+              f"nearest to the button (xy) {nearest_button:.3f} m, pressed {pressed}")
+    env.close()
+
+
+if __name__ == "__main__":
+    main()
