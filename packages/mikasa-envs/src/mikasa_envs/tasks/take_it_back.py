@@ -144,6 +144,9 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         super()._after_control_step()
         # Before this step's evaluate(): the first arrival latches the goal there, and the
         # observation of this step already shows the handed-over scene.
+        if self.gpu_sim_enabled:
+            # The GPU body buffer still holds the poses from before the substeps.
+            self.scene.px.gpu_fetch_rigid_dynamic_data()
         arrived = ~self.goal_reached_status & self._cube_in_goal()
         if bool(arrived.any()):
             self._hand_over(arrived.nonzero()[:, 0])
