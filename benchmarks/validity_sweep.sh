@@ -7,7 +7,8 @@
 #
 # OUT (default results/validity) gets one run directory per policy; EPISODES defaults to 50
 # (the canonical count), WORKERS to the CPU count; TASKS="ID ID ..." limits the sweep to those
-# tasks (default: --split all); BENCH is the mikasa-bench to use. Interrupted (a machine lent for 10-minute
+# tasks (default: --split all); VALIDITY_UPDATE=docs/VALIDITY.json keeps that table's rows for the
+# other tasks (`mikasa-bench validity --update`); BENCH is the mikasa-bench to use. Interrupted (a machine lent for 10-minute
 # commands, kill -9): run the same command again; each policy's run resumes where it stopped.
 # Cost: ~2 M env steps per policy over the 90 tasks (the oracle stops at its first success).
 # Measured: oracle 321 s and memoryless 491 s with 32 workers on a 32-core machine (both end
@@ -28,4 +29,5 @@ for policy in oracle oracle-memoryless random zero; do
       --out "$dir" --workers "$workers" --no-report "$@"
   fi
 done
-"$bench" validity "$out"/oracle "$out"/oracle-memoryless "$out"/random "$out"/zero --out "${VALIDITY_OUT:-docs/VALIDITY.md}"
+update=(); [ -n "${VALIDITY_UPDATE:-}" ] && update=(--update "$VALIDITY_UPDATE")
+"$bench" validity "$out"/oracle "$out"/oracle-memoryless "$out"/random "$out"/zero --out "${VALIDITY_OUT:-docs/VALIDITY.md}" "${update[@]}"
