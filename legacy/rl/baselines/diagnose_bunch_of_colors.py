@@ -26,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     agent = load_agent(args.checkpoint)
     env = SubEnvSpec(args.env_id, mode="state", reward_mode="dense").make()
-    targets = len(env.unwrapped.true_color_indices[0]) if hasattr(env.unwrapped, "true_color_indices") else "?"
+    targets = env.unwrapped.true_color_indices.shape[1]
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=100 + episode)
         correct = wrong = 0
@@ -40,9 +40,8 @@ def main() -> None:
             if terms is not None:  # the previous step's terms (upstream order)
                 correct = max(correct, int(terms["correct_touches"][0]))
                 wrong = max(wrong, int(terms["wrong_touches"][0]))
-            if "xy_dist_to_button" in info:
-                nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
-            pressed |= bool(info["button_pressed"][0]) if "button_pressed" in info else False
+            nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
+            pressed |= bool(info["button_pressed"][0])
             if bool(truncated[0]):
                 break
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "

@@ -142,6 +142,8 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
     # ------------------------------------------------------------- stepping
     def _after_control_step(self) -> None:
         super()._after_control_step()
+        if bool(self.goal_reached_status.all()):
+            return  # every env is past its arrival: nothing to hand over (no GPU fetch)
         # Before this step's evaluate(): the first arrival latches the goal there, and the
         # observation of this step already shows the handed-over scene.
         if self.gpu_sim_enabled:
