@@ -159,6 +159,13 @@ def test_lstm_trainer_runs_two_iterations_in_rgb_joints(ppo_lstm, tmp_path, monk
     assert torch.allclose(state["actor_logstd"], torch.full((1, 8), -1.5), atol=0.05)
     assert state["lstm.weight_hh_l0"].shape == (4 * 32, 32)
     assert state["feature_net.extractors.proprio.0.weight"].shape == (256, 25)  # 256 wide in the LSTM script
+    # --evaluate reloads it with the default --num-minibatches (32), which no single env divides.
+    at = TINY.index("--num-minibatches")
+    tiny_eval = TINY[:at] + TINY[at + 2:]
+    result = ppo_lstm.main(["--env-id", ENV_ID, "--include-rgb", "--include-joints", *tiny_eval,
+                            "--lstm-hidden-size", "32", "--evaluate", "--checkpoint",
+                            str(next(tmp_path.rglob("final_ckpt.pt")))])
+    assert result["episodes"] == 0  # 8 steps < the horizon
 
 
 @pytest.mark.parametrize(

@@ -465,10 +465,12 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
     args.batch_size = num_envs * args.num_steps
     args.minibatch_size = args.batch_size // args.num_minibatches
     args.num_iterations = args.total_timesteps // args.batch_size
-    if whole_env_minibatches and num_envs % args.num_minibatches:
+    # The batch sizes matter to training only: --evaluate runs no update, so it takes the
+    # training run's flags as they are (its num_minibatches need not divide its one env).
+    if not args.evaluate and whole_env_minibatches and num_envs % args.num_minibatches:
         raise ValueError(f"num_envs = {num_envs} must be a multiple of num_minibatches = {args.num_minibatches} "
                          "(a minibatch is whole envs' sequences)")
-    if args.minibatch_size < 1:
+    if not args.evaluate and args.minibatch_size < 1:
         raise ValueError(f"num_envs * num_steps = {args.batch_size} is smaller than num_minibatches = {args.num_minibatches}")
     if args.save_train_video_freq is not None:
         print("note: --save-train-video-freq is not implemented for CPU envs; no training videos are written")
