@@ -15,17 +15,17 @@ poses); further ``evaluate()`` calls in the same step only report, so reading th
 twice does not advance the machine.
 
 There is no cue or delay phase: ``action_mask`` is always true, ``cue_mask`` always false.
-The scene's fixed layout constants and ``slot_offsets`` live in ``_batteries_checker_layout.py``.
+The scene's fixed layout constants and ``slot_offsets`` live in ``_batteries_checker_layout.py``,
+the stage machine in ``_batteries_checker_stage.py``, and the scene building / placement /
+pose queries and the dense reward in ``_batteries_checker_mixins.py``; names that lived
+here before the split are re-exported.
 """
 
 from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
-import sapien
 import torch
-from mani_skill.utils import sapien_utils
 from mani_skill.utils.structs import Actor
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
@@ -37,13 +37,13 @@ from mikasa_envs.building_blocks.buttons import (
     Button,
 )
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
-from mikasa_envs.building_blocks.poses import (
+from mikasa_envs.building_blocks.poses import (  # noqa: F401  (HIDE_OFFSET_Z, write/zero_*: re-exported)
     HIDE_OFFSET_Z,
     UPRIGHT_CYLINDER_QUAT,
     write_actor_poses,
     zero_actor_velocities,
 )
-from mikasa_envs.tasks._batteries_checker_layout import (
+from mikasa_envs.tasks._batteries_checker_layout import (  # noqa: F401  (all but slot_offsets: re-exported)
     GRASP_CANDIDATE_RADIUS,
     GRASP_MAX_ANGLE_DEG,
     GRASP_MIN_FORCE,
@@ -51,14 +51,25 @@ from mikasa_envs.tasks._batteries_checker_layout import (
     _material,
     slot_offsets,
 )
+from mikasa_envs.tasks._batteries_checker_mixins import (
+    BatteriesCheckerRewardMixin,
+    BatteriesCheckerSceneMixin,
+)
+from mikasa_envs.tasks._batteries_checker_stage import BatteriesCheckerStageMachineMixin
 
 
-class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
+class BatteriesCheckerVLABaseEnv(
+    BatteriesCheckerStageMachineMixin,
+    BatteriesCheckerSceneMixin,
+    BatteriesCheckerRewardMixin,
+    MikasaVLABaseEnv,
+):
     """Base of the BatteriesChecker families: check every battery in the socket, remember the
     working ones, return each (Hard) and confirm each with the button.
 
     Variants set ``ACTIVE_BATTERIES`` / ``WORKING_BATTERIES``; Easy adds its automatic
-    return through ``_after_stage_update``.
+    return through ``_after_stage_update``. The stage machine, the scene's builders and
+    pose queries, and the dense reward come from the mixins.
     """
 
     # --- variant knobs
@@ -206,62 +217,6 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
         self._reset_step_results(torch.arange(n, device=dev))
         self._update_pending = False
 
-    def _build_tray(self) -> Actor:
-        """Visual-only tray box with a dark disc on top at each slot (local frame, before the yaw)."""
-        builder = self.scene.create_actor_builder()
-        builder.add_box_visual(half_size=self.TRAY_HALF_SIZE, material=_material(self.TRAY_RGBA))
-        disc_material = _material(self.SLOT_DISC_RGBA)
-        disc_z = self.TRAY_HALF_SIZE[2] + self.SLOT_DISC_HALF_HEIGHT
-        for dx, dy in slot_offsets(self.MAX_BATTERIES):
-            # World offset (dx, dy) in the tray frame turned by +90°: local (dy, −dx).
-            builder.add_cylinder_visual(
-                pose=sapien.Pose(p=[dy, -dx, disc_z], q=UPRIGHT_CYLINDER_QUAT),
-                radius=self.SLOT_DISC_RADIUS,
-                half_length=self.SLOT_DISC_HALF_HEIGHT,
-                material=disc_material,
-            )
-        builder.initial_pose = sapien.Pose(p=[0, 0, HIDE_OFFSET_Z])
-        return builder.build_kinematic(name="tray")
-
-    def _build_socket(self) -> Actor:
-        """A box with a square hole: collision = floor plate + four walls; visual = the full box
-        with a dark disc marking the hole (local frame, before the yaw)."""
-        hx, hy, hz = self.SOCKET_HALF_SIZE
-        hole = self.SOCKET_HOLE_HALF_WIDTH
-        floor_hz = self.SOCKET_FLOOR_HALF_HEIGHT
-        wall_x = (hx - hole) / 2  # half thickness of the walls on the local ±x sides (0.0148)
-        wall_y = (hy - hole) / 2  # ... on the local ±y sides (0.0108)
-        builder = self.scene.create_actor_builder()
-        builder.add_box_collision(pose=sapien.Pose(p=[0, 0, -self.SOCKET_FLOOR_BELOW_CENTRE]), half_size=[hx, hy, floor_hz])
-        for side in (-1.0, 1.0):
-            builder.add_box_collision(pose=sapien.Pose(p=[side * (hole + wall_x), 0, 0]), half_size=[wall_x, hy, hz])
-            builder.add_box_collision(pose=sapien.Pose(p=[0, side * (hole + wall_y), 0]), half_size=[hole, wall_y, hz])
-        builder.add_box_visual(half_size=[hx, hy, hz], material=_material(self.SOCKET_RGBA))
-        builder.add_cylinder_visual(
-            pose=sapien.Pose(p=[0, 0, hz + 0.0005], q=UPRIGHT_CYLINDER_QUAT),
-            radius=self.SOCKET_HOLE_DISC_RADIUS,
-            half_length=0.0005,
-            material=_material(self.SOCKET_HOLE_RGBA),
-        )
-        builder.initial_pose = sapien.Pose(p=[0, 0, HIDE_OFFSET_Z])
-        return builder.build_kinematic(name="socket")
-
-    def _build_battery(self, k: int) -> Actor:
-        """Battery k: an upright cylinder. Only active ones are dynamic; the others never
-        leave their hiding place, so they are kinematic (nothing to pin)."""
-        builder = self.scene.create_actor_builder()
-        material = sapien.physx.PhysxMaterial(self.BATTERY_FRICTION, self.BATTERY_FRICTION, 0.0)
-        builder.add_cylinder_collision(
-            radius=self.BATTERY_RADIUS, half_length=self.BATTERY_HALF_HEIGHT, material=material
-        )
-        builder.add_cylinder_visual(
-            radius=self.BATTERY_RADIUS, half_length=self.BATTERY_HALF_HEIGHT, material=_material(self.BATTERY_RGBA)
-        )
-        builder.initial_pose = sapien.Pose(p=[0, 0.05 * k, HIDE_OFFSET_Z], q=self.BATTERY_QUAT)
-        if k < self.ACTIVE_BATTERIES:
-            return builder.build(name=f"battery_{k}")
-        return builder.build_kinematic(name=f"battery_{k}")
-
     # ------------------------------------------------------------- episodes
     def _sample_phase_lengths(self, env_idx: torch.Tensor) -> None:
         # No phases (and no random draws for them).
@@ -292,25 +247,6 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
         self.oracle_info[env_idx] = working.to(torch.uint8)
         self._place_scene(env_idx)
 
-    def _place_scene(self, env_idx: torch.Tensor) -> None:
-        """Tray, socket, lamp, button and batteries at this episode's places."""
-        b, dev = len(env_idx), self.device
-        center = self.tray_center[env_idx]
-        yaw = torch.tensor(YAW_90_QUAT, device=dev).expand(b, 4)
-        half_z = torch.full((b, 1), self.TRAY_HALF_SIZE[2], device=dev)
-        tray = torch.cat([center, half_z, yaw], dim=1)
-        socket = torch.cat([self.socket_slot_pos[env_idx, :2], half_z, yaw], dim=1)
-        write_actor_poses(self.scene, [self.tray, self.socket], env_idx, torch.stack([tray, socket], dim=1))
-        lamp_xyz = torch.cat([center + torch.tensor([self.LAMP_OFFSET_X, 0.0], device=dev), torch.zeros(b, 1, device=dev)], 1)
-        self.lamp.place(env_idx, lamp_xyz, bulb=0)
-        self.button.place(env_idx, center + torch.tensor([0.0, self.BUTTON_OFFSET_Y], device=dev), yaw)
-        # Active batteries stand in their slots; the others are parked above theirs.
-        positions = self.tray_slot_positions[env_idx].clone()
-        positions[:, self.ACTIVE_BATTERIES :, 2] = HIDE_OFFSET_Z
-        quat = torch.tensor(self.BATTERY_QUAT, device=dev).expand(b, self.MAX_BATTERIES, 4)
-        write_actor_poses(self.scene, self.batteries, env_idx, torch.cat([positions, quat], dim=-1))
-        zero_actor_velocities(self.scene, self.batteries[: self.ACTIVE_BATTERIES], env_idx)
-
     def _on_episode_start(self, env_idx: torch.Tensor) -> None:
         self.checked_mask[env_idx] = False
         self.found_mask[env_idx] = False
@@ -333,186 +269,10 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
         self._events.setdefault("button_press_depth", torch.zeros(n, device=dev))[env_idx] = 0.0
         self._grasped[env_idx] = False
 
-    # --------------------------------------------------------------- queries
-    def battery_raw_poses(self) -> torch.Tensor:
-        """(B, 15, 7) raw poses of every battery (hidden ones included)."""
-        if not self.gpu_sim_enabled:
-            rows = [np.concatenate([(pose := b._objs[0].pose).p, pose.q]) for b in self.batteries]
-            return torch.from_numpy(np.asarray(rows, dtype=np.float32))[None].to(self.device)
-        return torch.stack([b.pose.raw_pose for b in self.batteries], dim=1)
-
-    def battery_positions(self) -> torch.Tensor:
-        """(B, 15, 3) current battery centres."""
-        if not self.gpu_sim_enabled:
-            rows = [b._objs[0].pose.p for b in self.batteries]
-            return torch.from_numpy(np.asarray(rows, dtype=np.float32))[None].to(self.device)
-        return torch.stack([b.pose.p for b in self.batteries], dim=1)
-
-    @property
-    def button_xy(self) -> torch.Tensor:
-        """(B, 2) the button centre."""
-        return self.button.xy
-
-    def lamp_is_on(self) -> torch.Tensor:
-        """(B,) whether the yellow bulb is the one shown."""
-        return self.lamp.shown == self.lamp.bulb_index("on")
-
-    def _grasp_flags(self, positions: torch.Tensor) -> torch.Tensor:
-        """(B, 15) the contact-force grasp test (ManiSkill's Panda ``is_grasping``) per active battery."""
-        flags = torch.zeros(self.num_envs, self.MAX_BATTERIES, dtype=torch.bool, device=self.device)
-        if self.gpu_sim_enabled:
-            for k in range(self.ACTIVE_BATTERIES):
-                flags[:, k] = self.agent.is_grasping(self.batteries[k])
-            return flags
-        # CPU (one env): one pass over the contact list, in numpy. Only batteries near the
-        # TCP can touch both fingers.
-        tcp = self.agent.tcp._objs[0].entity_pose.p
-        near = np.linalg.norm(positions[0, : self.ACTIVE_BATTERIES].numpy() - tcp, axis=-1) < GRASP_CANDIDATE_RADIUS
-        candidates = np.flatnonzero(near).tolist()
-        if not candidates:
-            return flags
-        contacts = self.scene.px.get_contacts()
-        entities = [self._battery_entities[k] for k in candidates]
-        grasp = np.ones(len(candidates), dtype=bool)
-        for finger, sign in zip(self._finger_links, (1.0, -1.0), strict=True):
-            pairs = sapien_utils.get_multiple_pairwise_contacts(contacts, finger.entity, entities)
-            force = np.array([sapien_utils.compute_total_impulse(pairs[e]) for e in entities]) / self.scene.px.timestep
-            # The finger's opening direction: its local +y (finger 1) or −y (finger 2).
-            direction = sign * finger.entity_pose.to_transformation_matrix()[:3, 1]
-            magnitude = np.linalg.norm(force, axis=-1)
-            cos = force @ direction / np.maximum(magnitude * np.linalg.norm(direction), 1e-12)
-            angle = np.rad2deg(np.arccos(np.clip(cos, -1.0, 1.0)))
-            grasp &= (magnitude >= GRASP_MIN_FORCE) & (angle <= GRASP_MAX_ANGLE_DEG)
-        flags[0, candidates] = torch.from_numpy(grasp).to(self.device)
-        return flags
-
-    # ---------------------------------------------------------- stage machine
+    # ------------------------------------------------------------------ step
     def _after_control_step(self) -> None:
         # On the GPU sim the new poses are fetched after this hook; the machine runs in evaluate().
         self._update_pending = True
-
-    def _teleport_batteries(self, env_idx: torch.Tensor, battery_idx: torch.Tensor, positions: torch.Tensor) -> None:
-        """Set battery ``battery_idx[i]`` of env ``env_idx[i]`` upright at ``positions[i]``, at rest."""
-        quat = torch.tensor(self.BATTERY_QUAT, device=self.device)
-        for k in torch.unique(battery_idx).tolist():
-            rows = battery_idx == k
-            envs = env_idx[rows]
-            poses = torch.cat([positions[rows], quat.expand(len(envs), 4)], dim=-1)
-            write_actor_poses(self.scene, [self.batteries[k]], envs, poses[:, None])
-            zero_actor_velocities(self.scene, [self.batteries[k]], envs)
-
-    def _update_stage_machine(self, pos: torch.Tensor, tcp: torch.Tensor) -> torch.Tensor:
-        """One step of §4 (socket, afterglow, insert, lamp, button, return, confirm) for TCP
-        positions ``tcp``; returns the battery positions after any teleport."""
-        b, dev = self.num_envs, self.device
-        rows = torch.arange(b, device=dev)
-        grasped = self._grasp_flags(pos)
-
-        # 1. Socket detection.
-        in_socket = self._in_socket(pos, grasped)
-        socket_has = in_socket.any(dim=1)
-        socket_idx = torch.where(socket_has, in_socket.int().argmax(dim=1), -1)
-        # 2. Afterglow.
-        self.lamp_afterglow = (self.lamp_afterglow - 1).clamp(min=0)
-        # 3. Insert.
-        insert = (self.action_stage == self.STAGE_INSERT) & socket_has
-        inserted = socket_idx.clamp(min=0)
-        self.action_stage = torch.where(insert, self.STAGE_RETURN, self.action_stage)
-        self.active_battery_idx = torch.where(insert, socket_idx, self.active_battery_idx)
-        inserted_working = insert & self.working_mask[rows, inserted]
-        self.lamp_afterglow = torch.where(inserted_working, self.LAMP_AFTERGLOW_STEPS, self.lamp_afterglow)
-        if bool(insert.any()):
-            envs = torch.nonzero(insert).flatten()
-            # Centred in the hole, resting on the floor plate, upright and still.
-            rest = self.socket_slot_pos[envs].clone()
-            rest[:, 2] = self._socket_rest_z
-            self._teleport_batteries(envs, inserted[envs], rest)
-            pos = pos.clone()
-            pos[envs, inserted[envs]] = rest
-        # 4. Lamp.
-        socket_has_working = (in_socket & self.working_mask).any(dim=1)
-        self.lamp.show(rows, (socket_has_working | (self.lamp_afterglow > 0)).long())
-        # 5. Button.
-        depth = self.button.press_depth(tcp, self.BUTTON_PRESS_RADIUS, inclusive=True)
-        self.button.show_depth(depth)
-        press = (depth >= self.BUTTON_PRESSED_DEPTH) & self.press_ready
-        self.press_ready = (self.press_ready & ~press) | (depth <= self.BUTTON_RELEASED_DEPTH)
-        # 6. Return.
-        active = self.active_battery_idx.clamp(min=0)
-        returned = (
-            (self.action_stage == self.STAGE_RETURN)
-            & (self.active_battery_idx >= 0)
-            & self._near_home(pos, 1.0)[rows, active]
-            & ~grasped[rows, active]
-            & ~in_socket[rows, active]
-        )
-        self.action_stage = torch.where(returned, self.STAGE_CONFIRM, self.action_stage)
-        # 7. Confirm.
-        confirm = (self.action_stage == self.STAGE_CONFIRM) & press
-        wrong_phase_press = press & (self.action_stage != self.STAGE_CONFIRM)
-        newly_checked = confirm & ~self.checked_mask[rows, active]
-        newly_found = newly_checked & self.working_mask[rows, active]
-        self.checked_mask[rows[confirm], active[confirm]] = True
-        self.found_mask[rows[newly_found], active[newly_found]] = True
-        self.action_stage = torch.where(confirm, self.STAGE_INSERT, self.action_stage)
-        self.active_battery_idx = torch.where(confirm, -1, self.active_battery_idx)
-
-        self._events.update(
-            socket_has_battery=socket_has,
-            socket_battery_idx=socket_idx,
-            socket_has_working=socket_has_working,
-            new_insert_event=insert,
-            new_return_event=returned,
-            new_confirm_event=confirm,
-            new_button_press_event=press,
-            button_press_depth=depth,
-            newly_found=newly_found,
-            wrong_phase_press=wrong_phase_press,
-        )
-        self._grasped = grasped
-        pos = self._after_stage_update(pos)
-        if self.gpu_sim_enabled:
-            self.scene.px.gpu_apply_rigid_dynamic_data()
-        return pos
-
-    def _after_stage_update(self, pos: torch.Tensor) -> torch.Tensor:
-        """Family hook run at the end of the stage machine (Easy's automatic return)."""
-        return pos
-
-    def _return_active_home(self, env_mask: torch.Tensor, pos: torch.Tensor) -> torch.Tensor:
-        """Put each masked env's active battery back in its slot (upright, at rest); returns
-        the updated (B, 15, 3) battery positions."""
-        envs = torch.nonzero(env_mask).flatten()
-        if len(envs) == 0:
-            return pos
-        battery = self.active_battery_idx[envs]
-        home = self.tray_slot_positions[envs, battery]
-        self._teleport_batteries(envs, battery, home)
-        pos = pos.clone()
-        pos[envs, battery] = home
-        return pos
-
-    @property
-    def _socket_rest_z(self) -> float:
-        floor_top = self.SOCKET_HALF_SIZE[2] - self.SOCKET_FLOOR_BELOW_CENTRE + self.SOCKET_FLOOR_HALF_HEIGHT
-        return floor_top + self.BATTERY_HALF_HEIGHT
-
-    def _in_socket(self, pos: torch.Tensor, grasped: torch.Tensor) -> torch.Tensor:
-        """(B, 15) active, not grasped, centre within the socket tolerances of the slot point."""
-        offset = pos - self.socket_slot_pos[:, None]
-        return (
-            self.active_mask
-            & (torch.linalg.norm(offset[..., :2], dim=-1) <= self.SOCKET_TOL_XY)
-            & (offset[..., 2].abs() <= self.SOCKET_TOL_Z)
-            & ~grasped
-        )
-
-    def _near_home(self, pos: torch.Tensor, scale: float) -> torch.Tensor:
-        """(B, 15) centre within ``scale`` × the return tolerances of its own slot."""
-        offset = pos - self.tray_slot_positions
-        return (torch.linalg.norm(offset[..., :2], dim=-1) <= scale * self.RETURN_TOL_XY) & (
-            offset[..., 2].abs() <= scale * self.RETURN_TOL_Z
-        )
 
     # --------------------------------------------------------------- evaluate
     def evaluate(self) -> dict:
@@ -574,64 +334,3 @@ class BatteriesCheckerVLABaseEnv(MikasaVLABaseEnv):
                 oracle_info=self.oracle_info,
             )
         return obs
-
-    # ---------------------------------------------------------------- reward
-    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        """Stage-shaped reaching / carrying / returning / pressing terms plus event bonuses (§6); 40 on success."""
-        b, dev = self.num_envs, self.device
-        rows = torch.arange(b, device=dev)
-        pos, tcp, events = self._battery_pos, self._tcp_pos, self._events
-        stage = self.action_stage
-        s_insert = (stage == self.STAGE_INSERT).float()
-        s_return = (stage == self.STAGE_RETURN).float()
-        s_confirm = (stage == self.STAGE_CONFIRM).float()
-
-        to_tcp = torch.linalg.norm(pos - tcp[:, None], dim=-1)
-        unchecked = self.active_mask & ~self.checked_mask
-        nearest = torch.where(unchecked, to_tcp, torch.full_like(to_tcp, float("inf"))).min(dim=1).values
-        reach_unchecked = torch.where(unchecked.any(dim=1), 1 - torch.tanh(4 * nearest), torch.zeros_like(nearest))
-        grasped_any = self._grasped.any(dim=1)
-        carried = pos[rows, self._grasped.int().argmax(dim=1)]
-        carry = torch.where(
-            grasped_any, 1 - torch.tanh(4 * torch.linalg.norm(carried - self.socket_slot_pos, dim=-1)), torch.zeros(b, device=dev)
-        )
-        active = self.active_battery_idx.clamp(min=0)
-        return_reward = 1 - torch.tanh(6 * torch.linalg.norm(pos[rows, active] - self.tray_slot_positions[rows, active], dim=-1))
-        # Upstream measures the "button" reach to the socket point (obj_to_goal_pos), see quirk 2.
-        button_reach = 1 - torch.tanh(8 * torch.linalg.norm(info["obj_to_goal_pos"], dim=-1))
-        button_press = (events["button_press_depth"] / self.BUTTON_MAX_DEPTH).clamp(0, 1)
-
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
-        smooth = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
-        insert, returned, confirm = (events[k].float() for k in ("new_insert_event", "new_return_event", "new_confirm_event"))
-        newly_found, wrong_press = events["newly_found"].float(), events["wrong_phase_press"].float()
-        reward = (
-            s_insert * (1.2 * reach_unchecked + 2.0 * carry)
-            + s_return * 3.0 * return_reward
-            + s_confirm * (1.8 * button_reach + 2.5 * button_press)
-            + 5.0 * insert + 6.0 * returned + 7.0 * confirm + 12.0 * newly_found
-            - 2.0 * wrong_press
-            - smooth
-        )
-        reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
-        self._reward_dict = dict(
-            reach_unchecked=reach_unchecked,
-            carry_reward=carry,
-            return_reward=return_reward,
-            button_reach_reward=button_reach,
-            button_press_reward=button_press,
-            insert_event=events["new_insert_event"],
-            return_event=events["new_return_event"],
-            confirm_event=events["new_confirm_event"],
-            newly_found=events["newly_found"],
-            wrong_phase_press=events["wrong_phase_press"],
-            smooth_penalty=smooth,
-            success=info["success"],
-        )
-        return reward
-
