@@ -64,6 +64,10 @@ class MikasaVLABaseEnv(BaseEnv):
     EMPTY_PHASE_STEPS: ClassVar[tuple[int, int]] = (1, 5)
     # The dense reward of a success step; normalized_dense divides by it.
     DENSE_REWARD_MAX: ClassVar[float] = 3.0
+    # The smoothness penalty's coefficients (`smoothness_penalty`), set by the families that use it.
+    ACTION_L2_COEF: ClassVar[float]
+    ACTION_DELTA_L2_COEF: ClassVar[float]
+    QVEL_L2_COEF: ClassVar[float]
 
     SENSOR_SIZE: ClassVar[int] = 128
     # GPU PhysX buffers a family raises above ManiSkill's defaults (upstream's values),
@@ -422,6 +426,21 @@ class MikasaVLABaseEnv(BaseEnv):
         delta = torch.where(self.elapsed_steps <= 1, torch.zeros_like(delta), delta)
         self._prev_action = action.clone()
         return torch.linalg.norm(action, dim=-1), delta
+
+    def smoothness_penalty(self, action: torch.Tensor | None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """(B,) c1·tanh(2‖a‖) + c2·tanh(5‖a − a_prev‖) + c3·tanh(2‖arm qvel‖), the smoothness
+        penalty of ``common.md`` §7.2 with the family's ``ACTION_L2_COEF``,
+        ``ACTION_DELTA_L2_COEF`` and ``QVEL_L2_COEF``; and its terms, keyed as the families'
+        ``reward_dict`` shows them."""
+        action_l2, delta_l2 = self._action_smoothness_terms(action)
+        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
+        penalty = (
+            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
+            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
+            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
+        )
+        terms = dict(action_l2=action_l2, delta_action_l2=delta_l2, qvel_l2=qvel_l2, smooth_penalty=penalty)
+        return penalty, terms
 
     @property
     def arm_qvel(self) -> torch.Tensor:

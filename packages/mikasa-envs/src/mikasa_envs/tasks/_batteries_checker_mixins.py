@@ -161,13 +161,7 @@ class BatteriesCheckerRewardMixin:
         button_reach = 1 - torch.tanh(8 * torch.linalg.norm(info["obj_to_goal_pos"], dim=-1))
         button_press = (events["button_press_depth"] / self.BUTTON_MAX_DEPTH).clamp(0, 1)
 
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
-        smooth = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
+        smooth, _ = self.smoothness_penalty(action)
         insert, returned, confirm = (events[k].float() for k in ("new_insert_event", "new_return_event", "new_confirm_event"))
         newly_found, wrong_press = events["newly_found"].float(), events["wrong_phase_press"].float()
         reward = (

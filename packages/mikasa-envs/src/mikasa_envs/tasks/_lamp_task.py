@@ -76,18 +76,6 @@ class LampTaskVLABaseEnv(MikasaVLABaseEnv):
             return torch.from_numpy(poses)[None].to(self.device)
         return torch.stack([a.pose.raw_pose for a in actors], dim=1)
 
-    def smoothness_penalty(self, action: torch.Tensor | None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """(B,) c1·tanh(2‖a‖) + c2·tanh(5‖a − a_prev‖) + c3·tanh(2‖arm qvel‖), and its terms."""
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
-        penalty = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
-        terms = dict(action_l2=action_l2, delta_action_l2=delta_l2, qvel_l2=qvel_l2, smooth_penalty=penalty)
-        return penalty, terms
-
     def finish_reward(self, reward: torch.Tensor, info: dict, terms: dict[str, torch.Tensor]) -> torch.Tensor:
         """Success steps get DENSE_REWARD_MAX, failed steps DENSE_REWARD_FAIL; keep the terms
         (``info["reward_dict"]`` shows them one step late, as upstream)."""

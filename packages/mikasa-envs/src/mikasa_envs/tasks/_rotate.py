@@ -198,20 +198,14 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
     def _reward_inputs(self, action: torch.Tensor, info: dict) -> dict[str, torch.Tensor]:
         """Terms both rewards use: TCP-to-peg distance, |error|, correctness, smoothness."""
         error = info["y_angle_error"].abs()
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
-        smooth = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
+        smooth, smoothness = self.smoothness_penalty(action)
         return dict(
             distance=torch.linalg.norm(self.peg.pose.p - self.agent.tcp.pose.p, dim=-1),
             abs_error=error,
             correct=error < self.angle_threshold,
             still=self._robot_static,
             success=info["success"],
-            smoothness=dict(action_l2=action_l2, delta_action_l2=delta_l2, qvel_l2=qvel_l2, smooth_penalty=smooth),
+            smoothness=smoothness,
         )
 
     def _finish_reward(self, reward: torch.Tensor, reward_dict: dict[str, torch.Tensor]) -> torch.Tensor:

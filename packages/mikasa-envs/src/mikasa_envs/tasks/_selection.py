@@ -339,12 +339,7 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
         reaching = 1 - torch.tanh(10 * distance)
         static = 1 - torch.tanh(5 * qvel_l2)
         bonus = 0.5 * (info["is_robot_static"] & info["is_obj_placed"]).float()
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        penalty = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
+        penalty, smoothness = self.smoothness_penalty(action)
         reward = reaching + 0.5 * static + bonus - penalty
         reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
         self._reward_dict = {
@@ -354,10 +349,7 @@ class SelectionVLABaseEnv(MikasaVLABaseEnv):
             "reached": distance < self.GOAL_THRESH,
             "success": info["success"],
             "static_reward": static,
-            "action_l2": action_l2,
-            "delta_action_l2": delta_l2,
-            "qvel_l2": qvel_l2,
-            "smooth_penalty": penalty,
+            **smoothness,
             "obj_to_goal_pos_y": info["obj_to_goal_pos"][:, 1],
             "obj_to_goal_pos_x": info["obj_to_goal_pos"][:, 0],
         }

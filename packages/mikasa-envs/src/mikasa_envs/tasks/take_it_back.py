@@ -223,13 +223,7 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
         place_goal = 1 - torch.tanh(5 * torch.linalg.norm(cube[:, :2] - self.goal_pos[:, :2], dim=-1))
         place_back = 1 - torch.tanh(5 * torch.linalg.norm(cube[:, :2] - self.initial_pos[:, :2], dim=-1))
         keep_contact = 1 - torch.tanh(6 * torch.linalg.norm(cube - tcp, dim=-1))
-        qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
-        action_l2, delta_l2 = self._action_smoothness_terms(action)
-        smooth = (
-            self.ACTION_L2_COEF * torch.tanh(2 * action_l2)
-            + self.ACTION_DELTA_L2_COEF * torch.tanh(5 * delta_l2)
-            + self.QVEL_L2_COEF * torch.tanh(2 * qvel_l2)
-        )
+        smooth, smoothness = self.smoothness_penalty(action)
         before = 2 * reaching_push + 1.5 * place_goal + 5 * place_goal * reached_push
         after = 10 * reaching_pull + 4 * keep_contact + 15 * place_back * reached_pull
         reward = torch.where(info["goal_reached_status"], after, before) - smooth
@@ -246,9 +240,6 @@ class TakeItBackVLAEnv(MikasaVLABaseEnv):
             "goal_reached_status": info["goal_reached_status"],
             "place_in_goal_reward": place_goal,
             "place_back_reward": place_back,
-            "action_l2": action_l2,
-            "delta_action_l2": delta_l2,
-            "qvel_l2": qvel_l2,
-            "smooth_penalty": smooth,
+            **smoothness,
         }
         return reward
