@@ -429,7 +429,7 @@ class MikasaVLABaseEnv(BaseEnv):
 
     def smoothness_penalty(self, action: torch.Tensor | None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """(B,) c1·tanh(2‖a‖) + c2·tanh(5‖a − a_prev‖) + c3·tanh(2‖arm qvel‖), the smoothness
-        penalty of ``common.md`` §7.2 with the family's ``ACTION_L2_COEF``,
+        penalty the reference's dense rewards share, with the family's ``ACTION_L2_COEF``,
         ``ACTION_DELTA_L2_COEF`` and ``QVEL_L2_COEF``; and its terms, keyed as the families'
         ``reward_dict`` shows them."""
         action_l2, delta_l2 = self._action_smoothness_terms(action)
