@@ -220,6 +220,21 @@ class ShellGameVLABaseEnv(MikasaVLABaseEnv):
         """1 − tanh(5·‖arm qvel‖₂)."""
         return 1 - torch.tanh(5 * torch.linalg.norm(self.arm_qvel, dim=-1))
 
+    def touch_reward(self, info: dict, penalty: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+        """The touch families' dense reward: (reaching + static·placed + still·placed [− penalty])
+        in the action phase, ``DENSE_REWARD_MAX`` on success; and its first ``reward_dict`` terms."""
+        distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
+        reaching = 1 - torch.tanh(5 * distance)
+        static = self.static_reward()
+        placed = info["is_obj_placed"].float()
+        still = info["is_robot_static"].float()
+        reward = reaching + static * placed + still * placed
+        if penalty is not None:
+            reward = reward - penalty
+        reward = reward * self.in_action_phase().float()
+        reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
+        return reward, {"reaching_reward": reaching, "static_reward": static, "tcp_to_obj_dist": distance}
+
 
 # ------------------------------------------------------------- Touch / Push / Pick
 class HiddenBallShellGameVLABaseEnv(RedBallMixin, ShellGameVLABaseEnv):
@@ -495,17 +510,6 @@ class ColorLampShellGameVLABaseEnv(ScriptedShellGameVLABaseEnv):
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
         """(reaching + static·placed + still·placed) in the action phase; 3 on success."""
-        distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
-        reaching = 1 - torch.tanh(5 * distance)
-        static = self.static_reward()
-        placed = info["is_obj_placed"].float()
-        still = info["is_robot_static"].float()
-        reward = (reaching + static * placed + still * placed) * self.in_action_phase().float()
-        reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
-        self._reward_dict = {
-            "reaching_reward": reaching,
-            "static_reward": static,
-            "tcp_to_obj_dist": distance,
-            "is_obj_placed": info["is_obj_placed"],
-        }
+        reward, terms = self.touch_reward(info)
+        self._reward_dict = {**terms, "is_obj_placed": info["is_obj_placed"]}
         return reward

@@ -65,18 +65,10 @@ class TouchMugMixin:
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
         """(reaching + static·placed + still·placed − shift penalty) in the action phase; 3 on success."""
-        distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
-        reaching = 1 - torch.tanh(5 * distance)
-        static = self.static_reward()
-        placed = info["is_obj_placed"].float()
-        still = info["is_robot_static"].float()
         penalty = self.MUG_DISPLACEMENT_PENALTY_COEF * torch.tanh(10 * info["mug_max_displacement"])
-        reward = (reaching + static * placed + still * placed - penalty) * self.in_action_phase().float()
-        reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
+        reward, terms = self.touch_reward(info, penalty)
         self._reward_dict = {
-            "reaching_reward": reaching,
-            "static_reward": static,
-            "tcp_to_obj_dist": distance,
+            **terms,
             "mug_max_displacement": info["mug_max_displacement"],
             "mug_shift_penalty": penalty,
             "is_mug_displacement_ok": info["is_mug_displacement_ok"],
