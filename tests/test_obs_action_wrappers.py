@@ -47,16 +47,14 @@ def test_state_only_reshapes_1d_and_wraps_flat_obs():
 # ----------------------------------------------------------------------------------------
 
 
+def _flattened(env, **flags) -> mw.FlattenRGBDObservationWrapper:
+    """``env`` behind the state-dict wrapper and the flattening wrapper (no depth)."""
+    return mw.FlattenRGBDObservationWrapper(mw.StateOnlyTensorToDictWrapper(env), depth=False, **flags)
+
+
 def test_flatten_drops_sentinel_and_oracle():
     env = FakeVLAEnv(num_envs=2)
-    w = mw.FlattenRGBDObservationWrapper(
-        mw.StateOnlyTensorToDictWrapper(env),
-        rgb=True,
-        depth=False,
-        state=False,
-        oracle=False,
-        joints=True,
-    )
+    w = _flattened(env, rgb=True, state=False, oracle=False, joints=True)
     obs, _ = w.reset()
     assert list(obs) == ["proprio", "rgb"]
     assert obs["proprio"].shape == (2, 25)
@@ -67,14 +65,7 @@ def test_flatten_drops_sentinel_and_oracle():
 
 def test_flatten_oracle_true_keeps_real_oracle_but_not_sentinel():
     env = FakeVLAEnv(num_envs=2)
-    w = mw.FlattenRGBDObservationWrapper(
-        mw.StateOnlyTensorToDictWrapper(env),
-        rgb=True,
-        depth=False,
-        state=False,
-        oracle=True,
-        joints=True,
-    )
+    w = _flattened(env, rgb=True, state=False, oracle=True, joints=True)
     obs, _ = w.reset()
     assert list(obs) == ["proprio", "rgb", "oracle_info"]
     assert obs["oracle_info"].tolist() == [[0], [1]]
@@ -86,14 +77,7 @@ def test_flatten_oracle_true_keeps_real_oracle_but_not_sentinel():
 def test_flatten_state_only_configuration():
     env = FakeVLAEnv(num_envs=2, obs_mode="state")
     env.task_cue = torch.tensor([1.0, 2.0])
-    w = mw.FlattenRGBDObservationWrapper(
-        mw.StateOnlyTensorToDictWrapper(env),
-        rgb=False,
-        depth=False,
-        state=True,
-        oracle=False,
-        joints=False,
-    )
+    w = _flattened(env, rgb=False, state=True, oracle=False, joints=False)
     obs, _ = w.reset()
     assert list(obs) == ["state", "task_cue"]
     assert obs["state"].shape == (2, 25)
