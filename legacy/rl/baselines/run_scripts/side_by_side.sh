@@ -7,7 +7,10 @@
 #
 # RUNS_FILE: one run per line, "<name> <trainer> <flags...>" with <trainer> ppo_memtasks.py or
 # ppo_memtasks_lstm.py ('#' starts a comment);
-# runs/<name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/.
+# <name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/. On a lent
+# machine, make WORK_DIR a git-ignored folder of the tree (e.g. runs/gpu_<name>) and carry each
+# run's latest resume.pt at its path there: a call may land on a fresh machine even right after
+# a warm one, and then only what it carries is there to resume from.
 # With ARCHIVE_DIR, each run's directory is packed into ARCHIVE_DIR/<name>.tgz at the end,
 # with only the KEEP_CKPTS (default 3) latest periodic ckpt_*.pt (a state checkpoint is
 # ~1.2 MB, an rgb one ~10 MB, and a lent machine returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
