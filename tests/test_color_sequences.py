@@ -203,6 +203,8 @@ def test_bunch_wrong_touch_blocks_pressing(make_env):
     assert min(float(i["xy_dist_to_button"][0]) for i in infos) < 0.065
     assert oracle.press_start is not None and not bool(base.press_latch.pending[0])
     assert int(infos[-1]["reward_dict"]["wrong_touches"][0]) == 1
+    # No goal is left: the reaching term pays nothing (DEVIATIONS.md Fixed #30), not 1 − tanh(0).
+    assert float(infos[-1]["reward_dict"]["reaching_reward"][0]) == 0.0
 
 
 @pytest.mark.parametrize("env_id", ["SeqOfColors3-VLA-v0", "ChainOfColors3-VLA-v0"])
@@ -274,6 +276,26 @@ def test_strong_displacement_blocks_success(make_env):
     *_, info = env.step(oracle.forward(obs))
     assert bool(info["strong_cube_displacement"][0]) and not bool(info["success"][0])
     assert float(info["max_cube_displacement_xy"][0]) > 0.06
+
+
+def test_displacement_before_the_press_ends_the_reaching_reward(make_env):
+    env = make_env("BunchOfColors3-VLA-v0")
+    base = env.unwrapped
+    oracle = make_oracle(env)
+    obs, _ = env.reset(seed=SEED)
+    oracle.reset()
+    while not bool(base.button_pressable[0]):
+        obs, _, _, _, info = env.step(oracle.forward(obs))
+    *_, info = env.step(ZERO)
+    assert float(info["reward_dict"]["reaching_reward"][0]) > 0.0  # aiming at the button
+    key = next(k for k in range(9) if not base.sequence_cubes_mask[0, k])
+    pose = base.cubes[key].pose.raw_pose.clone()
+    pose[0, 0] += 0.07
+    base.cubes[key].set_pose(pose)
+    env.step(ZERO)
+    *_, info = env.step(ZERO)  # reward_dict is the previous step's
+    assert not bool(info["button_pressable"][0]) and not info["obj_to_goal_pos"].any()
+    assert float(info["reward_dict"]["reaching_reward"][0]) == 0.0
 
 
 def test_touches_during_the_cue_do_not_count(make_env):

@@ -1,6 +1,7 @@
 """What a BunchOfColors / SeqOfColors / ChainOfColors PPO state policy does per episode:
-how many of the shown cubes it touched, how many others, how near the button it came, and
-whether it pressed it (success needs exactly the shown cubes touched, then a press).
+how many of the shown cubes it touched, how many others, how near the button it came once
+the button could be pressed (the shown cubes and no other touched), how far from it it ended,
+and whether it pressed it (success needs exactly the shown cubes touched, then a press).
 
     python legacy/rl/baselines/diagnose_bunch_of_colors.py CKPT [--env-id BunchOfColors3-v0] [--episodes 8]
 
@@ -31,8 +32,9 @@ def main() -> None:
         obs, _ = env.reset(seed=100 + episode)
         correct = wrong = 0
         pressed = False
-        nearest_button = float("inf")
-        for _ in range(env.unwrapped.spec.max_episode_steps or 120):
+        pressable_from = None  # the first step at which the button could be pressed
+        nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
+        for step in range(env.unwrapped.spec.max_episode_steps or 120):
             with torch.no_grad():
                 action = agent.get_action(flatten_state_obs(obs), deterministic=True)
             obs, _, _, truncated, info = env.step(action)
@@ -40,12 +42,16 @@ def main() -> None:
             if terms is not None:  # the previous step's terms (upstream order)
                 correct = max(correct, int(terms["correct_touches"][0]))
                 wrong = max(wrong, int(terms["wrong_touches"][0]))
-            nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
+            if bool(info["button_pressable"][0]):
+                pressable_from = step if pressable_from is None else pressable_from
+                nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
             if bool(truncated[0]):
                 break
-        print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
-              f"nearest to the button (xy) {nearest_button:.3f} m, pressed {pressed}")
+        button = (f"pressable from step {pressable_from}, nearest to the button (xy) {nearest_button:.3f} m"
+                  if pressable_from is not None else "never pressable")
+        print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, {button}, "
+              f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it, pressed {pressed}")
     env.close()
 
 

@@ -477,7 +477,12 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         """A·(reaching + 0.5·static + touch terms − displacement penalty); 400 on success."""
         in_action = self.phase_masks(self.elapsed_steps)[2]
         distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
-        reaching = 1 - torch.tanh(10 * distance)
+        # Upstream's goal vector is zero once no goal is left short of the press (a wrong touch,
+        # a cube pushed > 6 cm, a broken order): 1 - tanh(0) paid the full reaching term in an
+        # episode that can no longer succeed, more than the way to the button earns
+        # (DEVIATIONS.md Fixed #30). Such a step earns no reaching term.
+        goal_lost = in_action & ~self.next_target_mask.any(dim=-1) & ~self.button_pressable & ~self.button_pressed
+        reaching = torch.where(goal_lost, torch.zeros_like(distance), 1 - torch.tanh(10 * distance))
         qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
         static = 1 - torch.tanh(5 * qvel_l2)
         correct, wrong = self._touch_counts()
