@@ -186,6 +186,25 @@ def _count_success(infos: list[dict]) -> int:
     return sum(bool(i["success"][0]) for i in infos)
 
 
+def _oracle_until_pressable(make_env):
+    """A BunchOfColors3 episode driven by its oracle up to the first pressable frame."""
+    env = make_env("BunchOfColors3-VLA-v0")
+    base = env.unwrapped
+    oracle = make_oracle(env)
+    obs, _ = env.reset(seed=SEED)
+    oracle.reset()
+    while not bool(base.button_pressable[0]):
+        obs, *_ = env.step(oracle.forward(obs))
+    return env, base
+
+
+def _push_a_non_target_cube(base, dx: float = 0.07) -> None:
+    key = next(k for k in range(9) if not base.sequence_cubes_mask[0, k])
+    pose = base.cubes[key].pose.raw_pose.clone()
+    pose[0, 0] += dx
+    base.cubes[key].set_pose(pose)
+
+
 def test_bunch_wrong_touch_blocks_pressing(make_env):
     env = make_env("BunchOfColors3-VLA-v0")
     base = env.unwrapped
@@ -235,13 +254,7 @@ def test_ordered_families_reject_the_right_set_in_the_wrong_order(make_env, env_
 
 
 def test_press_needs_a_lift_and_the_cap_follows_the_tcp(make_env):
-    env = make_env("BunchOfColors3-VLA-v0")
-    base = env.unwrapped
-    oracle = make_oracle(env)
-    obs, _ = env.reset(seed=SEED)
-    oracle.reset()
-    while not bool(base.button_pressable[0]):
-        obs, *_ = env.step(oracle.forward(obs))
+    env, base = _oracle_until_pressable(make_env)
     tcp_pose = base.agent.tcp.pose.raw_pose[0].numpy()
     button = np.array([*base.button_xy[0].tolist(), 0.07])
     lowest = 1.0
@@ -268,30 +281,17 @@ def test_strong_displacement_blocks_success(make_env):
     oracle.reset()
     infos = _run_oracle(env, oracle, obs, int(base.action_phase_start[0]) + 80)
     assert _count_success(infos) > 0 and bool(infos[-1]["success"][0])
-    # Push a non-target cube 7 cm away: the success flag (not latched) drops.
-    key = next(k for k in range(9) if not base.sequence_cubes_mask[0, k])
-    pose = base.cubes[key].pose.raw_pose.clone()
-    pose[0, 0] += 0.07
-    base.cubes[key].set_pose(pose)
+    _push_a_non_target_cube(base)  # 7 cm: the success flag (not latched) drops
     *_, info = env.step(oracle.forward(obs))
     assert bool(info["strong_cube_displacement"][0]) and not bool(info["success"][0])
     assert float(info["max_cube_displacement_xy"][0]) > 0.06
 
 
 def test_displacement_before_the_press_ends_the_reaching_reward(make_env):
-    env = make_env("BunchOfColors3-VLA-v0")
-    base = env.unwrapped
-    oracle = make_oracle(env)
-    obs, _ = env.reset(seed=SEED)
-    oracle.reset()
-    while not bool(base.button_pressable[0]):
-        obs, _, _, _, info = env.step(oracle.forward(obs))
+    env, base = _oracle_until_pressable(make_env)
     *_, info = env.step(ZERO)
     assert float(info["reward_dict"]["reaching_reward"][0]) > 0.0  # aiming at the button
-    key = next(k for k in range(9) if not base.sequence_cubes_mask[0, k])
-    pose = base.cubes[key].pose.raw_pose.clone()
-    pose[0, 0] += 0.07
-    base.cubes[key].set_pose(pose)
+    _push_a_non_target_cube(base)
     env.step(ZERO)
     *_, info = env.step(ZERO)  # reward_dict is the previous step's
     assert not bool(info["button_pressable"][0]) and not info["obj_to_goal_pos"].any()
