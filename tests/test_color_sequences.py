@@ -186,13 +186,18 @@ def _count_success(infos: list[dict]) -> int:
     return sum(bool(i["success"][0]) for i in infos)
 
 
-def _oracle_until_pressable(make_env):
-    """A BunchOfColors3 episode driven by its oracle up to the first pressable frame."""
+def _bunch_episode(make_env):
+    """A BunchOfColors3 episode at its reset, with its oracle: (env, base env, oracle, obs)."""
     env = make_env("BunchOfColors3-VLA-v0")
-    base = env.unwrapped
     oracle = make_oracle(env)
     obs, _ = env.reset(seed=SEED)
     oracle.reset()
+    return env, env.unwrapped, oracle, obs
+
+
+def _oracle_until_pressable(make_env):
+    """A BunchOfColors3 episode driven by its oracle up to the first pressable frame."""
+    env, base, oracle, obs = _bunch_episode(make_env)
     while not bool(base.button_pressable[0]):
         obs, *_ = env.step(oracle.forward(obs))
     return env, base
@@ -206,11 +211,7 @@ def _push_a_non_target_cube(base, dx: float = 0.07) -> None:
 
 
 def test_bunch_wrong_touch_blocks_pressing(make_env):
-    env = make_env("BunchOfColors3-VLA-v0")
-    base = env.unwrapped
-    oracle = make_oracle(env)
-    obs, _ = env.reset(seed=SEED)
-    oracle.reset()
+    env, base, oracle, obs = _bunch_episode(make_env)
     targets = base.oracle_info[0].tolist()
     wrong = next(k for k in range(9) if k not in targets)
     oracle.plan = [wrong, *targets]
@@ -274,11 +275,7 @@ def test_press_needs_a_lift_and_the_cap_follows_the_tcp(make_env):
 
 
 def test_strong_displacement_blocks_success(make_env):
-    env = make_env("BunchOfColors3-VLA-v0")
-    base = env.unwrapped
-    oracle = make_oracle(env)
-    obs, _ = env.reset(seed=SEED)
-    oracle.reset()
+    env, base, oracle, obs = _bunch_episode(make_env)
     infos = _run_oracle(env, oracle, obs, int(base.action_phase_start[0]) + 80)
     assert _count_success(infos) > 0 and bool(infos[-1]["success"][0])
     _push_a_non_target_cube(base)  # 7 cm: the success flag (not latched) drops

@@ -43,7 +43,8 @@ def main() -> None:
                 correct = max(correct, int(terms["correct_touches"][0]))
                 wrong = max(wrong, int(terms["wrong_touches"][0]))
             if bool(info["button_pressable"][0]):
-                pressable_from = step if pressable_from is None else pressable_from
+                if pressable_from is None:
+                    pressable_from = step
                 nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
             if bool(truncated[0]):

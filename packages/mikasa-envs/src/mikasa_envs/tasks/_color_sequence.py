@@ -397,9 +397,8 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         has_next = next_key >= 0
         self.next_target_mask = has_next[:, None] & (self._color_keys == next_key[:, None])
         goal = torch.where(has_next[:, None], points[self._env_rows, next_key.clamp(min=0)], self.button_goal)
-        aims = has_next | (self.button_pressable & ~self.button_pressed)
         return dict(
-            obj_to_goal_pos=(goal - tcp) * aims[:, None],
+            obj_to_goal_pos=(goal - tcp) * self._aims_at_goal()[:, None],
             is_robot_static=is_robot_static,
             success=success,
             strong_cube_displacement=strong_displacement,
@@ -409,6 +408,11 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
             button_press_depth=depth,
             xy_dist_to_button=xy_dist_to_button,
         )
+
+    def _aims_at_goal(self) -> torch.Tensor:
+        """(B,) whether ``obj_to_goal_pos`` aims anywhere: a next target, or the button while
+        it is pressable and not yet pressed."""
+        return self.next_target_mask.any(dim=-1) | (self.button_pressable & ~self.button_pressed)
 
     def _update_set_conditions(self) -> None:
         self.all_seq_touched = (self.touched_cubes == self.sequence_cubes_mask).all(dim=-1)
@@ -481,7 +485,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         # a cube pushed > 6 cm, a broken order): 1 - tanh(0) paid the full reaching term in an
         # episode that can no longer succeed, more than the way to the button earns
         # (DEVIATIONS.md Fixed #30). Such a step earns no reaching term.
-        goal_lost = in_action & ~self.next_target_mask.any(dim=-1) & ~self.button_pressable & ~self.button_pressed
+        goal_lost = in_action & ~self._aims_at_goal() & ~self.button_pressed
         reaching = torch.where(goal_lost, torch.zeros_like(distance), 1 - torch.tanh(10 * distance))
         qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
         static = 1 - torch.tanh(5 * qvel_l2)
