@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from mikasa_envs.building_blocks.buttons import BUTTON_CAP_REST_Z
+from mikasa_envs.building_blocks.buttons import BUTTON_CAP_REST_Z, CONFIRM_LIFT
 from mikasa_envs.tasks.bunch_of_colors import cue_spot_xyz
 from mikasa_oracles import make_oracle
 from mikasa_oracles.controller import move_towards
@@ -267,6 +267,11 @@ def test_press_needs_a_lift_and_the_cap_follows_the_tcp(make_env):
         lowest = min(lowest, float(base.agent.tcp.pose.p[0, 2]))
     assert lowest < 0.0831 and bool(base.press_latch.pending[0]) and not bool(base.button_pressed[0])
     assert float(info["button_press_depth"][0]) > 0.0049
+    # Once the press has registered the goal is the lift that confirms it (DEVIATIONS.md
+    # Fixed #31), straight above the button: rising is what the reaching term pays for.
+    lift_z = float(base.press_latch.press_start_z[0]) + CONFIRM_LIFT + base.LIFT_GOAL_MARGIN
+    goal = base.agent.tcp.pose.p[0] + info["obj_to_goal_pos"][0]
+    np.testing.assert_allclose(goal.numpy(), [*base.button_xy[0].tolist(), lift_z], atol=1e-6)
     for _ in range(30):  # lift 0.1 m: confirmed
         tcp_pose = base.agent.tcp.pose.raw_pose[0].numpy()
         *_, info = env.step(move_towards(tcp_pose, button + [0, 0, 0.11], gain=1.5, gripper=-1.0))

@@ -26,6 +26,7 @@ from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
     BUTTON_CAP_HALF_LENGTH,
     BUTTON_TOP_Z,
+    CONFIRM_LIFT,
     MAX_PRESS_DEPTH,
     Button,
     PressLatch,
@@ -89,6 +90,9 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     BUTTON_CAP_RGBA: ClassVar[tuple[int, int, int, int]] = (210, 80, 80, 255)
     # obj_to_goal_pos aims this far above the cap top once the button is the goal.
     BUTTON_GOAL_ABOVE_TOP: ClassVar[float] = 0.005
+    # Once a press has registered, it aims this far above the height that confirms it
+    # (DEVIATIONS.md Fixed #31), so that reaching the goal confirms the press.
+    LIFT_GOAL_MARGIN: ClassVar[float] = 0.01
 
     CORRECT_TOUCH_REWARD: ClassVar[float] = 90.0
     WRONG_TOUCH_PENALTY: ClassVar[float] = 10.0
@@ -396,7 +400,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         next_key = torch.where(action, self._next_target_key(), -1)
         has_next = next_key >= 0
         self.next_target_mask = has_next[:, None] & (self._color_keys == next_key[:, None])
-        goal = torch.where(has_next[:, None], points[self._env_rows, next_key.clamp(min=0)], self.button_goal)
+        goal = torch.where(has_next[:, None], points[self._env_rows, next_key.clamp(min=0)], self._press_goal())
         return dict(
             obj_to_goal_pos=(goal - tcp) * self._aims_at_goal()[:, None],
             is_robot_static=is_robot_static,
@@ -408,6 +412,15 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
             button_press_depth=depth,
             xy_dist_to_button=xy_dist_to_button,
         )
+
+    def _press_goal(self) -> torch.Tensor:
+        """(B, 3) where the button part of the task leads: the button goal until a press has
+        registered, then the lift that confirms it, straight above the button. Upstream aims at
+        the button until the press is confirmed, so reaching pays for staying pressed down,
+        never for the lift (DEVIATIONS.md Fixed #31)."""
+        lift_z = self.press_latch.press_start_z + CONFIRM_LIFT + self.LIFT_GOAL_MARGIN
+        lift_goal = torch.cat([self.button.xy, lift_z[:, None]], dim=-1)
+        return torch.where(self.press_latch.pending[:, None], lift_goal, self.button_goal)
 
     def _aims_at_goal(self) -> torch.Tensor:
         """(B,) whether ``obj_to_goal_pos`` aims anywhere: a next target, or the button while
