@@ -1,7 +1,9 @@
 """What a BunchOfColors / SeqOfColors / ChainOfColors PPO state policy does per episode:
 how many of the shown cubes it touched, how many others, how near the button it came once
 the button could be pressed (the shown cubes and no other touched), how far from it it ended,
-and whether it pressed it (success needs exactly the shown cubes touched, then a press).
+whether a press registered (the TCP low over the button while pressable), how high the TCP
+ended against the height that confirms that press, and whether it was confirmed (success needs
+exactly the shown cubes touched, then a confirmed press).
 
     python legacy/rl/baselines/diagnose_bunch_of_colors.py CKPT [--env-id BunchOfColors3-v0] [--episodes 8]
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 import argparse
 
 import torch
+from mikasa_envs.building_blocks.buttons import CONFIRM_LIFT
 from mikasa_robo_rl.agents import flatten_state_obs, load_agent
 from mikasa_robo_rl.vector_env import SubEnvSpec
 
@@ -32,6 +35,7 @@ def main() -> None:
         obs, _ = env.reset(seed=100 + episode)
         correct = wrong = 0
         pressed = False
+        registered_at = None  # the TCP height at which a press registered
         pressable_from = None  # the first step at which the button could be pressed
         nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
         for step in range(env.unwrapped.spec.max_episode_steps or 120):
@@ -47,12 +51,19 @@ def main() -> None:
                     pressable_from = step
                 nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
+            latch = env.unwrapped.press_latch
+            if bool(latch.pending[0]) and registered_at is None:
+                registered_at = float(latch.press_start_z[0])
             if bool(truncated[0]):
                 break
         button = (f"pressable from step {pressable_from}, nearest to the button (xy) {nearest_button:.3f} m"
                   if pressable_from is not None else "never pressable")
+        tcp_z = float(env.unwrapped.agent.tcp.pose.p[0, 2])
+        press = ("no press registered" if registered_at is None else
+                 f"a press registered at z {registered_at:.3f}, confirmed from z {registered_at + CONFIRM_LIFT:.3f}")
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, {button}, "
-              f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it, pressed {pressed}")
+              f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
+              f"pressed {pressed}")
     env.close()
 
 
