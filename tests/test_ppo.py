@@ -272,3 +272,20 @@ def test_capture_video_records_eval_episodes(ppo, tmp_path, monkeypatch):
     ppo.main(["--env-id", ENV_ID, "--include-state", *flags, "--evaluate", "--checkpoint",
               str(run_dir / "final_ckpt.pt")])
     assert {p.suffix for p in (run_dir / "test_videos").iterdir()} == {".mp4", ".h5", ".json"}
+
+
+def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, monkeypatch, capsys):
+    from mikasa_robo_rl.agents import AgentStateOnly
+
+    checkpoint = tmp_path / "untrained.pt"
+    torch.save(AgentStateOnly(88, 8).state_dict(), checkpoint)  # BunchOfColors3-v0's state is 88 floats
+    path = ROOT / "legacy/rl/baselines/diagnose_bunch_of_colors.py"
+    spec = importlib.util.spec_from_file_location("diagnose_bunch_of_colors", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(sys, "argv", ["diagnose", str(checkpoint), "--episodes", "1"])
+    module.main()
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    # An untrained policy stays near its start pose: nothing touched, the button never pressable.
+    assert line.startswith("episode 0: correct touches 0/3, wrong touches 0, never pressable")
+    assert "no press registered, pressed False" in line
