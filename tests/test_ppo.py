@@ -15,8 +15,9 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV_ID = "RememberColor3-v0"  # horizon 60
 
 
-def _load_trainer(name: str = "ppo_memtasks"):
-    path = ROOT / f"legacy/rl/baselines/ppo/{name}.py"
+def _load_script(name: str = "ppo_memtasks", folder: str = "legacy/rl/baselines/ppo"):
+    """The script ``<folder>/<name>.py`` (by default a PPO trainer) as a module."""
+    path = ROOT / folder / f"{name}.py"
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up while building Args
@@ -26,12 +27,12 @@ def _load_trainer(name: str = "ppo_memtasks"):
 
 @pytest.fixture(scope="module")
 def ppo():
-    return _load_trainer()
+    return _load_script()
 
 
 @pytest.fixture(scope="module")
 def ppo_lstm():
-    return _load_trainer("ppo_memtasks_lstm")
+    return _load_script("ppo_memtasks_lstm")
 
 
 def _rollout(env: CpuVectorEnv, steps: int) -> tuple[dict, list[dict]]:
@@ -279,10 +280,7 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
 
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(88, 8).state_dict(), checkpoint)  # BunchOfColors3-v0's state is 88 floats
-    path = ROOT / "legacy/rl/baselines/diagnose_bunch_of_colors.py"
-    spec = importlib.util.spec_from_file_location("diagnose_bunch_of_colors", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _load_script("diagnose_bunch_of_colors", "legacy/rl/baselines")
     monkeypatch.setattr(sys, "argv", ["diagnose", str(checkpoint), "--episodes", "1"])
     module.main()
     line = capsys.readouterr().out.strip().splitlines()[-1]

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 
 import torch
-from mikasa_envs.building_blocks.buttons import CONFIRM_LIFT
 from mikasa_robo_rl.agents import flatten_state_obs, load_agent
 from mikasa_robo_rl.vector_env import SubEnvSpec
 
@@ -35,7 +34,7 @@ def main() -> None:
         obs, _ = env.reset(seed=100 + episode)
         correct = wrong = 0
         pressed = False
-        registered_at = None  # the TCP height at which a press registered
+        registered_at = confirm_at = None  # TCP heights: where a press registered, what confirms it
         pressable_from = None  # the first step at which the button could be pressed
         nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
         for step in range(env.unwrapped.spec.max_episode_steps or 120):
@@ -53,14 +52,14 @@ def main() -> None:
             pressed |= bool(info["button_pressed"][0])
             latch = env.unwrapped.press_latch
             if bool(latch.pending[0]) and registered_at is None:
-                registered_at = float(latch.press_start_z[0])
+                registered_at, confirm_at = float(latch.press_start_z[0]), float(latch.confirm_z[0])
             if bool(truncated[0]):
                 break
         button = (f"pressable from step {pressable_from}, nearest to the button (xy) {nearest_button:.3f} m"
                   if pressable_from is not None else "never pressable")
         tcp_z = float(env.unwrapped.agent.tcp.pose.p[0, 2])
         press = ("no press registered" if registered_at is None else
-                 f"a press registered at z {registered_at:.3f}, confirmed from z {registered_at + CONFIRM_LIFT:.3f}")
+                 f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}")
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, {button}, "
               f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
               f"pressed {pressed}")

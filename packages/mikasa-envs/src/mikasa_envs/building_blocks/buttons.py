@@ -153,6 +153,12 @@ class PressLatch:
         self.pending[env_idx] = False
         self.press_start_z[env_idx] = 0.0
 
+    @property
+    def confirm_z(self) -> torch.Tensor:
+        """(B,) the TCP height that confirms a registered press: where it registered + CONFIRM_LIFT
+        (meaningful where ``pending``)."""
+        return self.press_start_z + CONFIRM_LIFT
+
     def update(
         self, depth: torch.Tensor, tcp_z: torch.Tensor, release_gate: torch.Tensor, press_gate: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -162,6 +168,6 @@ class PressLatch:
         self.press_start_z = torch.where(raw, tcp_z, self.press_start_z)
         self.pending |= raw
         self.ready &= ~raw
-        confirmed = press_gate & self.pending & self.ready & (tcp_z >= self.press_start_z + CONFIRM_LIFT)
+        confirmed = press_gate & self.pending & self.ready & (tcp_z >= self.confirm_z)
         self.pending &= ~confirmed
         return raw, confirmed

@@ -26,7 +26,6 @@ from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
     BUTTON_CAP_HALF_LENGTH,
     BUTTON_TOP_Z,
-    CONFIRM_LIFT,
     MAX_PRESS_DEPTH,
     Button,
     PressLatch,
@@ -418,7 +417,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         registered, then the lift that confirms it, straight above the button. Upstream aims at
         the button until the press is confirmed, so reaching pays for staying pressed down,
         never for the lift (DEVIATIONS.md Fixed #31)."""
-        lift_z = self.press_latch.press_start_z + CONFIRM_LIFT + self.LIFT_GOAL_MARGIN
+        lift_z = self.press_latch.confirm_z + self.LIFT_GOAL_MARGIN
         lift_goal = torch.cat([self.button.xy, lift_z[:, None]], dim=-1)
         return torch.where(self.press_latch.pending[:, None], lift_goal, self.button_goal)
 

@@ -329,7 +329,7 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         confirm_depth = self.confirm_button.press_depth(tcp, self.BUTTON_PRESS_RADIUS)
         self._advance(tcp, depth, confirm_depth)
         phase = self.elapsed_steps >= self.action_phase_start
-        lift_target_z = self.latch.press_start_z + CONFIRM_LIFT
+        lift_target_z = self.latch.confirm_z
         cap_centre = torch.cat([self.button.xy, (BUTTON_CAP_REST_Z - depth)[:, None]], dim=-1)
         return dict(
             success=phase & self.submit_success,
