@@ -205,7 +205,7 @@ def test_shipped_state_checkpoint_solves_its_task(ppo, tmp_path, monkeypatch, en
     assert result["episodes"] == 4 and result["success_once"] >= 0.75
 
 
-def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
+def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch, capsys):
     # --time-limit 0 stops after the first iteration with resume.pt written; --resume goes on
     # in the same run directory from iteration 2 and ends with the final checkpoint.
     monkeypatch.chdir(tmp_path)
@@ -215,7 +215,8 @@ def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
     state = torch.load(resume_file, weights_only=False)
     assert (state["iteration"], state["global_step"]) == (1, 16)
     assert not any(tmp_path.rglob("final_ckpt.pt"))
-    ppo.main([*flags, "--resume", str(resume_file), "--learning-rate", "1e-4"])
+    ppo.main([*flags, "--resume", str(resume_file), "--learning-rate", "1e-4", "--resume-min-logstd", "-0.2"])
+    assert "log std raised to at least -0.2: [-0.2, -0.2," in capsys.readouterr().out
     assert [p.relative_to(resume_file.parent).as_posix() for p in sorted(tmp_path.rglob("*.pt"))] == [
         "ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
     state = torch.load(resume_file, weights_only=False)
@@ -226,6 +227,20 @@ def test_time_limited_run_resumes_where_it_stopped(ppo, tmp_path, monkeypatch):
         ppo.main(["--env-id", "RememberColor5-v0", "--include-state", *TINY, "--resume", str(resume_file)])
     with pytest.raises(FileNotFoundError, match="no such file"):
         ppo.main([*flags, "--resume", "nowhere/resume.pt"])
+    with pytest.raises(ValueError, match="applies to a --resume run"):
+        ppo.main([*flags, "--resume-min-logstd", "-1"])
+
+
+def test_resume_with_a_larger_batch_goes_on_to_the_total_steps(ppo, tmp_path, monkeypatch):
+    # Saved after iteration 1 (16 steps); going on with 4 envs (32 steps an iteration) to 48
+    # steps is one more iteration, numbered 2, though 48 // 32 = 1 iteration in all.
+    monkeypatch.chdir(tmp_path)
+    flags = ["--env-id", ENV_ID, "--include-state", *TINY]
+    ppo.main([*flags, "--time-limit", "0"])
+    (resume_file,) = tmp_path.rglob("resume.pt")
+    ppo.main([*flags, "--resume", str(resume_file), "--num-envs", "4", "--total-timesteps", "48"])
+    state = torch.load(resume_file, weights_only=False)
+    assert (state["iteration"], state["global_step"]) == (2, 48)
 
 
 VLA_ID = "RememberColor3-VLA-v0"

@@ -110,6 +110,9 @@ class PPOArgs:
     """env worker processes (default: one per CPU core, at most one per env); 0 = in this process"""
     resume: str | None = None
     """a run's resume.pt: go on with that run (networks, optimizer, step counters, RNG, run directory) at this --learning-rate"""
+    resume_min_logstd: float | None = None
+    """with --resume: raise the policy's log std to at least this in every action dimension (an
+    extension: re-opens the exploration of a run whose action noise has collapsed; default: keep)"""
     time_limit: float | None = None
     """stop after the iteration that passes this many seconds, resume.pt saved (to chain time-limited jobs)"""
 
@@ -371,6 +374,10 @@ class Run:
         # first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
+        if self.args.resume_min_logstd is not None:
+            with torch.no_grad():
+                agent.actor_logstd.clamp_(min=self.args.resume_min_logstd)
+            print(f"log std raised to at least {self.args.resume_min_logstd}: {[round(v, 3) for v in agent.actor_logstd.flatten().tolist()]}")
         torch.set_rng_state(state["torch_rng"])
         np.random.set_state(state["numpy_rng"])
         self.saves, self.start_step = state["saves"], state["global_step"]
@@ -476,11 +483,17 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
         print("note: --save-train-video-freq is not implemented for CPU envs; no training videos are written")
     run_name, save_dir = run_directory(args, mode, script)
     resumed = None
+    if args.resume_min_logstd is not None and not args.resume:
+        raise ValueError("--resume-min-logstd applies to a --resume run (a fresh run takes --initial-logstd)")
     if args.resume:
         if args.evaluate:
             raise ValueError("--resume continues training; --evaluate takes --checkpoint")
         resumed = _load_resume_state(args.resume, args, mode)
         save_dir = Path(resumed["save_dir"])
+        # Iterations count on from the saved one; the run still stops at --total-timesteps when
+        # it goes on with another batch size (--num-envs, --num-steps) than it was saved with.
+        steps_left = max(0, args.total_timesteps - resumed["global_step"])
+        args.num_iterations = resumed["iteration"] + steps_left // args.batch_size
 
     random.seed(args.seed)
     np.random.seed(args.seed)
