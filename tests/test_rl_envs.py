@@ -10,6 +10,7 @@ import mikasa_robo_rl
 import numpy as np
 import pytest
 import torch
+from mani_skill.utils.registration import REGISTERED_ENVS
 from mikasa_robo_rl import get_rl_task, list_rl_tasks, rl_env_ids
 from mikasa_robo_rl.wrappers import apply_rl_wrappers, env_info
 from mikasa_wrappers import (
@@ -60,7 +61,10 @@ def test_state_mode_contract(make_rl_env, env_id):
     env = make_rl_env(env_id)
     base = env.unwrapped
     assert env_id in gym.registry and type(base).__name__ == env_id.replace("-v0", "Env")
-    assert base.DENSE_REWARD_MAX == task.reward_divisor
+    # The release's normalised dense divides by its listed constant; a success step earns what
+    # the VLA family's does (RotateLenient 60, Bunch/Seq/Chain 400: not the divisor).
+    assert base.normalized_dense_divisor == task.reward_divisor
+    assert base.DENSE_REWARD_MAX == REGISTERED_ENVS[task.vla_env_id].cls.DENSE_REWARD_MAX
     assert base.single_action_space.shape == (8,)
     obs, info = env.reset(seed=5)
     assert obs.dtype == torch.float32 and obs.shape[0] == 1

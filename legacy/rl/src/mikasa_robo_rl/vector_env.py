@@ -81,7 +81,7 @@ class SubEnvSpec:
             raise ValueError(f"noop_steps applies to the RL ids only; {self.env_id} is a VLA id (use 1)")
         if not vla:
             env_info(self.env_id, self.noop_steps)
-        # The trainers' normalized_dense is upstream's, dense / DENSE_REWARD_MAX unclipped.
+        # The trainers' normalized_dense is upstream's, dense / its divisor, unclipped.
         # The envs clip theirs to [0, 1] (their published contract), and clipped, every
         # exploring step whose smoothness penalty outweighs the rest is worth exactly 0:
         # PPO gets no signal (baselines/RESULTS.md, "The clipped reward trap").
@@ -104,7 +104,7 @@ class SubEnvSpec:
                 env = apply_rl_wrappers(env, self.mode, noop_steps=self.noop_steps)
             if upstream_normalized:
                 env = gym.wrappers.TransformReward(
-                    env, partial(torch.div, other=float(env.unwrapped.DENSE_REWARD_MAX))
+                    env, partial(torch.div, other=float(env.unwrapped.normalized_dense_divisor))
                 )
             if self.video_dir is not None and index == 0:
                 from mani_skill.utils.wrappers.record import RecordEpisode

@@ -62,8 +62,11 @@ class MikasaVLABaseEnv(BaseEnv):
     # Inclusive [lo, hi] ranges of the cue and empty (memory delay) phases, in steps.
     CUE_PHASE_STEPS: ClassVar[tuple[int, int]] = (1, 5)
     EMPTY_PHASE_STEPS: ClassVar[tuple[int, int]] = (1, 5)
-    # The dense reward of a success step; normalized_dense divides by it.
+    # The dense reward of a success step; normalized_dense divides by it unless a variant
+    # gives its own divisor (NORMALIZED_DENSE_DIVISOR: the RL release divides some families by
+    # another constant while their success step keeps this value).
     DENSE_REWARD_MAX: ClassVar[float] = 3.0
+    NORMALIZED_DENSE_DIVISOR: ClassVar[float | None] = None
     # The smoothness penalty's coefficients (`smoothness_penalty`), set by the families that use it.
     ACTION_L2_COEF: ClassVar[float]
     ACTION_DELTA_L2_COEF: ClassVar[float]
@@ -409,10 +412,17 @@ class MikasaVLABaseEnv(BaseEnv):
         self.set_state_dict(task_state.unflatten_like(self._init_raw_state, flat), env_idx)
 
     # --------------------------------------------------------------- reward
+    @property
+    def normalized_dense_divisor(self) -> float:
+        """What normalized_dense divides the dense reward by: ``NORMALIZED_DENSE_DIVISOR`` where
+        a variant sets it, else the success value ``DENSE_REWARD_MAX``."""
+        divisor = self.NORMALIZED_DENSE_DIVISOR
+        return self.DENSE_REWARD_MAX if divisor is None else divisor
+
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        """Dense reward divided by its success value, clipped to [0, 1]."""
+        """Dense reward divided by ``normalized_dense_divisor``, clipped to [0, 1]."""
         dense = self.compute_dense_reward(obs=obs, action=action, info=info)
-        return (dense / self.DENSE_REWARD_MAX).clamp(0.0, 1.0)
+        return (dense / self.normalized_dense_divisor).clamp(0.0, 1.0)
 
     def _action_smoothness_terms(self, action: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         """(‖a‖, ‖a − a_prev‖) per env; the delta is 0 on an episode's first step."""

@@ -14,7 +14,8 @@ class FixedCueAndDelay:
 class FixedColorSequenceTiming(FixedCueAndDelay):
     """Bunch/Seq/ChainOfColors: each cue lasts 5 steps (``STEP_DURATION``; Seq/Chain show
     the cubes one after another, so their cue lasts 5·L), then 5 empty steps
-    (``EMPTY_DURATION``); the dense reward is normalised by 100 instead of 400."""
+    (``EMPTY_DURATION``); the dense reward is normalised by 100 instead of 400, while a
+    success step still earns the family's 400 (4.0 normalised)."""
 
     CUE_STEP_DURATION = (5, 5)
-    DENSE_REWARD_MAX = 100.0
+    NORMALIZED_DENSE_DIVISOR = 100.0

@@ -11,9 +11,10 @@ from mikasa_robo_rl.registration import register_rl_task
 class RotateLenientRL:
     """The RL release's RotateLenient: success counts only once ``elapsed_steps > 5`` (a
     peg that starts near the target is not a free success), and the dense reward is
-    normalised by 25 instead of 60."""
+    normalised by 25 instead of 60, while a success step still earns the family's 60 (2.4
+    normalised)."""
 
-    DENSE_REWARD_MAX = 25.0
+    NORMALIZED_DENSE_DIVISOR = 25.0
     SUCCESS_AFTER_STEP = 5
 
     def _extra_evaluation(self, info: dict) -> torch.Tensor:
