@@ -14,8 +14,7 @@ class FixedCueAndDelay:
 class FixedColorSequenceTiming(FixedCueAndDelay):
     """Bunch/Seq/ChainOfColors: each cue lasts 5 steps (``STEP_DURATION``; Seq/Chain show
     the cubes one after another, so their cue lasts 5·L), then 5 empty steps
-    (``EMPTY_DURATION``); the dense reward is normalised by 100 instead of 400, while a
-    success step still earns the family's 400 (4.0 normalised)."""
+    (``EMPTY_DURATION``). (The release normalises the dense reward by 100 instead of 400,
+    while a success step still earns 400: the manifest's divisor, set at registration.)"""
 
     CUE_STEP_DURATION = (5, 5)
-    NORMALIZED_DENSE_DIVISOR = 100.0

@@ -10,11 +10,10 @@ from mikasa_robo_rl.registration import register_rl_task
 
 class RotateLenientRL:
     """The RL release's RotateLenient: success counts only once ``elapsed_steps > 5`` (a
-    peg that starts near the target is not a free success), and the dense reward is
-    normalised by 25 instead of 60, while a success step still earns the family's 60 (2.4
-    normalised)."""
+    peg that starts near the target is not a free success). (The release normalises the
+    dense reward by 25 instead of 60, while a success step still earns 60: the manifest's
+    divisor, set at registration.)"""
 
-    NORMALIZED_DENSE_DIVISOR = 25.0
     SUCCESS_AFTER_STEP = 5
 
     def _extra_evaluation(self, info: dict) -> torch.Tensor:
