@@ -246,6 +246,25 @@ def test_resume_with_a_larger_batch_goes_on_to_the_total_steps(ppo, tmp_path, mo
     assert (state["iteration"], state["global_step"]) == (2, 48)
 
 
+def test_resume_at_another_reward_scale_scales_the_critics_values(ppo, tmp_path, monkeypatch, capsys):
+    # Saved at --reward-scale 1 after iteration 1; going on at 0.01 with no step left to train
+    # (total = the saved step) writes final_ckpt.pt straight from the restored agent.
+    monkeypatch.chdir(tmp_path)
+    flags = ["--env-id", ENV_ID, "--include-state", *TINY]
+    ppo.main([*flags, "--time-limit", "0"])
+    (resume_file,) = tmp_path.rglob("resume.pt")
+    saved = torch.load(resume_file, weights_only=False)
+    assert saved["reward_scale"] == 1.0
+    ppo.main([*flags, "--resume", str(resume_file), "--reward-scale", "0.01", "--total-timesteps", "16"])
+    assert "critic outputs scaled by 0.01" in capsys.readouterr().out
+    (final,) = tmp_path.rglob("final_ckpt.pt")
+    head = torch.load(final, weights_only=True)
+    for name in ("critic.6.weight", "critic.6.bias"):
+        torch.testing.assert_close(head[name], saved["agent"][name] * 0.01)
+    torch.testing.assert_close(head["critic.4.weight"], saved["agent"]["critic.4.weight"])
+    torch.testing.assert_close(head["actor_mean.6.weight"], saved["agent"]["actor_mean.6.weight"])
+
+
 VLA_ID = "RememberColor3-VLA-v0"
 
 

@@ -75,6 +75,18 @@ class _GaussianHeads(nn.Module):
     critic: nn.Module
     actor_logstd: nn.Parameter
 
+    def value_head(self) -> nn.Linear:
+        """The critic's output layer (the last ``nn.Linear`` of ``critic``)."""
+        return [m for m in self.critic.modules() if isinstance(m, nn.Linear)][-1]
+
+    def scale_values(self, factor: float) -> None:
+        """Multiply every value the critic outputs by ``factor`` (its output layer's weight and
+        bias): what a change of the reward scale does to the returns it predicts."""
+        head = self.value_head()
+        with torch.no_grad():
+            head.weight.mul_(factor)
+            head.bias.mul_(factor)
+
     def _distribution(self, mean: torch.Tensor) -> Normal:
         return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
 

@@ -374,6 +374,7 @@ class Run:
         # first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
+        self._rescale_values(agent, optimizer, state.get("reward_scale"))
         if self.args.resume_min_logstd is not None:
             with torch.no_grad():
                 agent.actor_logstd.clamp_(min=self.args.resume_min_logstd)
@@ -383,6 +384,22 @@ class Run:
         self.saves, self.start_step = state["saves"], state["global_step"]
         print(f"resumed {self.save_dir} after iteration {state['iteration']} (step {state['global_step']})")
         return state["iteration"] + 1, state["global_step"]
+
+    def _rescale_values(self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, saved: float | None) -> None:
+        """A run resumed at another ``--reward-scale`` than it was saved with (recorded in its
+        resume.pt since 2026-11-27): scale the critic's outputs to the new returns, and start the
+        optimizer's moments afresh. Without the first, the first updates would fit values off by
+        the ratio and their advantages would be noise. The moments are all in the old units: the
+        critic's directly, the actor's through the one gradient-norm clip over both networks,
+        whose factor the critic's gradient sets; kept, they made the first steps of a run resumed
+        at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01)."""
+        if saved is None or saved == self.args.reward_scale:
+            return
+        factor = self.args.reward_scale / saved
+        agent.scale_values(factor)
+        optimizer.state.clear()
+        print(f"--reward-scale {self.args.reward_scale} (saved with {saved}): critic outputs scaled by {factor:g}, "
+              "optimizer moments reset")
 
     def save(self, agent: torch.nn.Module, name: str | None = None, iteration: int | None = None) -> None:
         """Checkpoint ``agent`` (with ``--save-model``): ``name``, or the next periodic
@@ -409,7 +426,8 @@ class Run:
             _save_atomically(
                 dict(agent=self.agent.state_dict(), optimizer=self.optimizer.state_dict(), iteration=iteration,
                      global_step=global_step, saves=self.saves, save_dir=str(self.save_dir),
-                     env_id=self.args.env_id, mode=self.mode, torch_rng=torch.get_rng_state(),
+                     env_id=self.args.env_id, mode=self.mode, reward_scale=self.args.reward_scale,
+                     torch_rng=torch.get_rng_state(),
                      numpy_rng=np.random.get_state()),
                 self.save_dir / RESUME_FILE,
             )
