@@ -75,14 +75,10 @@ class _GaussianHeads(nn.Module):
     critic: nn.Module
     actor_logstd: nn.Parameter
 
-    def value_head(self) -> nn.Linear:
-        """The critic's output layer (the last ``nn.Linear`` of ``critic``)."""
-        return [m for m in self.critic.modules() if isinstance(m, nn.Linear)][-1]
-
     def scale_values(self, factor: float) -> None:
         """Multiply every value the critic outputs by ``factor`` (its output layer's weight and
         bias): what a change of the reward scale does to the returns it predicts."""
-        head = self.value_head()
+        head = [m for m in self.critic.modules() if isinstance(m, nn.Linear)][-1]
         with torch.no_grad():
             head.weight.mul_(factor)
             head.bias.mul_(factor)

@@ -369,9 +369,9 @@ class Run:
         state = self.resumed
         agent.load_state_dict(state["agent"])
         optimizer.load_state_dict(state["optimizer"])
-        # The command's --learning-rate wins over the saved one (Adam's moments are kept): a
-        # run can go on at a lower rate, where a fresh optimizer from --checkpoint would
-        # first take full-size steps in every weight.
+        # The command's --learning-rate wins over the saved one (Adam's moments are kept unless
+        # the reward scale changed, _rescale_values): a run can go on at a lower rate, where a
+        # fresh optimizer from --checkpoint would first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
         self._rescale_values(agent, optimizer, state.get("reward_scale"))
