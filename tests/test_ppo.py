@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 import torch
+from mikasa_robo_rl.agents import AgentStateOnly
 from mikasa_robo_rl.ppo import PPOArgs, observation_mode, parse_args
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_ID = "RememberColor3-v0"  # horizon 60
@@ -141,7 +143,9 @@ def test_state_trainer_runs_two_iterations_and_reloads_its_checkpoint(ppo, tmp_p
     assert sorted(p.name for p in tmp_path.rglob("*.pt")) == ["ckpt_0_1.pt", "final_ckpt.pt", "resume.pt"]
     logstd = torch.load(next(tmp_path.rglob("final_ckpt.pt")), weights_only=True)["actor_logstd"]
     assert logstd.shape == (1, 8) and torch.allclose(logstd, torch.full_like(logstd, -2.0), atol=0.05)
-    assert any(tmp_path.rglob("events.out.tfevents.*"))
+    (events,) = tmp_path.rglob("events.out.tfevents.*")
+    logged = EventAccumulator(str(events)).Reload().Tags()["scalars"]
+    assert {"losses/value_loss", "losses/actor_grad_norm", "losses/critic_grad_norm"} <= set(logged)
     result = ppo.main(["--env-id", ENV_ID, "--include-state", *TINY, "--evaluate", "--checkpoint",
                        str(next(tmp_path.rglob("final_ckpt.pt")))])
     assert result["episodes"] == 0 and "success_once" not in result  # 8 steps < the horizon
@@ -264,6 +268,19 @@ def test_resume_at_another_reward_scale_scales_the_critics_values(ppo, tmp_path,
         torch.testing.assert_close(head[name], saved["agent"][name] * 0.01)
     torch.testing.assert_close(head["critic.4.weight"], saved["agent"]["critic.4.weight"])
     torch.testing.assert_close(head["actor_mean.6.weight"], saved["agent"]["actor_mean.6.weight"])
+
+
+def test_head_grad_norms_split_the_gradient_between_policy_and_critic():
+    agent = AgentStateOnly(obs_dim=5, action_dim=3)
+    x = torch.randn(4, 5)
+    agent.get_value(x).sum().backward()  # a critic-only loss: the policy's parameters get none
+    norms = agent.head_grad_norms()
+    assert norms["actor_grad_norm"] == 0 and norms["critic_grad_norm"] > 0
+    agent.zero_grad()
+    _, logprob, _, _ = agent.get_action_and_value(x)
+    (-logprob.sum()).backward()
+    norms = agent.head_grad_norms()
+    assert norms["actor_grad_norm"] > 0 and norms["critic_grad_norm"] == 0
 
 
 VLA_ID = "RememberColor3-VLA-v0"

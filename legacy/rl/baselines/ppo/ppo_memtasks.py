@@ -130,6 +130,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         b_advantages, b_returns, b_values = advantages.reshape(-1), returns.reshape(-1), values.reshape(-1)
         update_start = time.time()
         clipfracs = []
+        grad_norms = {}  # of the last minibatch that stepped
         stop = False
         for _ in range(args.update_epochs):
             order = torch.randperm(args.batch_size, device=device)
@@ -146,13 +147,14 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                     break
                 optimizer.zero_grad()
                 loss.backward()
+                grad_norms = agent.head_grad_norms()  # before the clip: what each network's loss asked for
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 optimizer.step()
             if stop:
                 break
         update_time = time.time() - update_start
 
-        if run.end_iteration(iteration, global_step, optimizer.param_groups[0]["lr"], stats, clipfracs, b_values,
+        if run.end_iteration(iteration, global_step, optimizer.param_groups[0]["lr"], stats | grad_norms, clipfracs, b_values,
                           b_returns, rollout_time, update_time):
             return run.stop_early()
 

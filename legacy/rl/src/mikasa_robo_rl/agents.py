@@ -12,9 +12,10 @@ has one: :func:`flatten_state_obs`); the checkpoint is its plain ``state_dict``
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -82,6 +83,19 @@ class _GaussianHeads(nn.Module):
         with torch.no_grad():
             head.weight.mul_(factor)
             head.bias.mul_(factor)
+
+    def head_grad_norms(self) -> dict[str, torch.Tensor]:
+        """L2 norms of the current gradients of the critic's parameters and of the policy's own
+        (``actor_mean``, ``actor_logstd``; a shared encoder counts in neither), as
+        ``actor_grad_norm`` / ``critic_grad_norm``. Taken before the one gradient-norm clip over
+        all parameters: a critic norm far above the actor's means the clip shrinks the policy's
+        step to a fraction of what its loss asked for."""
+        def norm(params: Iterator[nn.Parameter]) -> torch.Tensor:
+            grads = [p.grad.detach().flatten() for p in params if p.grad is not None]
+            return torch.linalg.norm(torch.cat(grads)) if grads else torch.zeros(())
+
+        actor = itertools.chain(self.actor_mean.parameters(), [self.actor_logstd])
+        return {"actor_grad_norm": norm(actor), "critic_grad_norm": norm(self.critic.parameters())}
 
     def _distribution(self, mean: torch.Tensor) -> Normal:
         return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))

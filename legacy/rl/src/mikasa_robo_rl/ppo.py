@@ -300,6 +300,11 @@ def log_iteration(
         "charts/SPS": sps, "time/step": step, "time/update_time": update_time,
         "time/rollout_time": rollout_time, "time/rollout_fps": rollout_steps / rollout_time,
     }
+    # The gradient norms of the update's last stepped minibatch (none when --target-kl
+    # stopped the update before its first step).
+    for key in ("actor_grad_norm", "critic_grad_norm"):
+        if key in stats:
+            scalars[f"losses/{key}"] = stats[key].item()
     for name, value in scalars.items():
         log.scalar(name, value, step)
 
