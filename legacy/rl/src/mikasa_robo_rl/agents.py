@@ -12,10 +12,9 @@ has one: :func:`flatten_state_obs`); the checkpoint is its plain ``state_dict``
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -90,11 +89,10 @@ class _GaussianHeads(nn.Module):
         ``actor_grad_norm`` / ``critic_grad_norm``. Taken before the one gradient-norm clip over
         all parameters: a critic norm far above the actor's means the clip shrinks the policy's
         step to a fraction of what its loss asked for."""
-        def norm(params: Iterator[nn.Parameter]) -> torch.Tensor:
-            grads = [p.grad.detach().flatten() for p in params if p.grad is not None]
-            return torch.linalg.norm(torch.cat(grads)) if grads else torch.zeros(())
+        def norm(params: Iterable[nn.Parameter]) -> torch.Tensor:
+            return nn.utils.get_total_norm([p.grad for p in params if p.grad is not None])
 
-        actor = itertools.chain(self.actor_mean.parameters(), [self.actor_logstd])
+        actor = [*self.actor_mean.parameters(), self.actor_logstd]
         return {"actor_grad_norm": norm(actor), "critic_grad_norm": norm(self.critic.parameters())}
 
     def _distribution(self, mean: torch.Tensor) -> Normal:
