@@ -14,7 +14,9 @@
 # With ARCHIVE_DIR, each run's directory is packed into ARCHIVE_DIR/<name>.tgz at the end,
 # with only the KEEP_CKPTS (default 3) latest periodic ckpt_*.pt (a state checkpoint is
 # ~1.2 MB, an rgb one ~10 MB, and a lent machine returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
-# is the interpreter that has mikasa-robo-rl[train].
+# is the interpreter that has mikasa-robo-rl[train]. NUM_WORKERS, when set, overrides each run's
+# --num-workers (the last occurrence of a flag wins), so one run file serves the 16-core GPU machine
+# and, between its calls, this 2-core machine: NUM_WORKERS=2 bash side_by_side.sh ...
 set -u
 limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archive=${4:-}
 root=$(pwd); python=${PYTHON:-python3}
@@ -26,7 +28,7 @@ while read -r name trainer flags; do
   resume=$(cd "$work/$name" && find . -name resume.pt | sort | tail -1)
   # shellcheck disable=SC2086  # the flags are words
   (cd "$work/$name" && echo "== $(date +%T) start ${resume:+--resume $resume}" >>log.txt &&
-   exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
+   exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${NUM_WORKERS:+--num-workers "$NUM_WORKERS"} ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
 done <"$runs_file"
 wait
 for name in "${names[@]}"; do
