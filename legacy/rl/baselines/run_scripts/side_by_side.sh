@@ -25,7 +25,8 @@ names=()
 while read -r name trainer flags; do
   [[ -z "$name" || "$name" == \#* ]] && continue
   names+=("$name"); mkdir -p "$work/$name"
-  resume=$(cd "$work/$name" && find . -name resume.pt | sort | tail -1)
+  # the newest by time: a resume.pt copied in by hand may sort after the run's own by name
+  resume=$(cd "$work/$name" && find . -name resume.pt -printf '%T@ %p\n' | sort -n | tail -1 | cut -d' ' -f2-)
   # shellcheck disable=SC2086  # the flags are words
   (cd "$work/$name" && echo "== $(date +%T) start ${resume:+--resume $resume}" >>log.txt &&
    exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${NUM_WORKERS:+--num-workers "$NUM_WORKERS"} ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
