@@ -20,6 +20,7 @@
 set -u
 limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archive=${4:-}
 root=$(pwd); python=${PYTHON:-python3}
+[[ "$python" == */* && "$python" != /* ]] && python="$root/$python"  # each run starts in its own directory
 export OMP_NUM_THREADS=1  # the env workers and trainers share the cores
 names=()
 while read -r name trainer flags; do
