@@ -342,3 +342,17 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
     # An untrained policy stays near its start pose: nothing touched, the button never pressable.
     assert line.startswith("episode 0: correct touches 0/3, wrong touches 0, never pressable")
     assert "no press registered, pressed False" in line
+
+
+def test_shell_game_touch_diagnosis_reports_reach_and_shove_per_episode(tmp_path, monkeypatch, capsys):
+    from mikasa_robo_rl.agents import AgentStateOnly
+
+    checkpoint = tmp_path / "untrained.pt"
+    torch.save(AgentStateOnly(47, 7).state_dict(), checkpoint)  # ShellGameTouch-VLA-v0: 47 state floats, 7-D ee action
+    module = _load_script("diagnose_shell_game_touch", "legacy/rl/baselines")
+    monkeypatch.setattr(sys, "argv", ["diagnose", str(checkpoint), "--episodes", "1"])
+    module.main()
+    episode, summary = capsys.readouterr().out.strip().splitlines()[-2:]
+    # An untrained policy stays near its start pose: no mug within 8 cm, none shoved.
+    assert episode.startswith("seed 100: success 0, within 8 cm from step None")
+    assert summary.startswith("success 0/1, within 8 cm 0/1, shoved > 0.05 m 0/1")

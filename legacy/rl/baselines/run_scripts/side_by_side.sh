@@ -22,12 +22,15 @@ limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archiv
 root=$(pwd); python=${PYTHON:-python3}
 [[ "$python" == */* && "$python" != /* ]] && python="$root/$python"  # each run starts in its own directory
 export OMP_NUM_THREADS=1  # the env workers and trainers share the cores
+newest() {  # the COUNT newest files named PATTERN under the current directory, oldest first
+  find . -name "$1" -printf '%T@ %p\n' | sort -n | tail -"$2" | cut -d' ' -f2-
+}
 names=()
 while read -r name trainer flags; do
   [[ -z "$name" || "$name" == \#* ]] && continue
   names+=("$name"); mkdir -p "$work/$name"
   # the newest by time: a resume.pt copied in by hand may sort after the run's own by name
-  resume=$(cd "$work/$name" && find . -name resume.pt -printf '%T@ %p\n' | sort -n | tail -1 | cut -d' ' -f2-)
+  resume=$(cd "$work/$name" && newest resume.pt 1)
   # shellcheck disable=SC2086  # the flags are words
   (cd "$work/$name" && echo "== $(date +%T) start ${resume:+--resume $resume}" >>log.txt &&
    exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${NUM_WORKERS:+--num-workers "$NUM_WORKERS"} ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
@@ -37,7 +40,7 @@ for name in "${names[@]}"; do
   grep -h "eval @\|Error" "$work/$name/log.txt" | tail -2 | sed "s/^/$name: /"
   tail -1 "$work/$name/log.txt" | sed "s/^/$name: /"
   if [ -n "$archive" ]; then
-    keep=$(cd "$work/$name" && find . -name 'ckpt_*.pt' -printf '%T@ %p\n' | sort -n | tail -"${KEEP_CKPTS:-3}" | cut -d' ' -f2)
+    keep=$(cd "$work/$name" && newest 'ckpt_*.pt' "${KEEP_CKPTS:-3}")
     # shellcheck disable=SC2086  # the kept paths are words
     tar cf "$archive/$name.tar" -C "$work/$name" --exclude='ckpt_*' .
     [ -n "$keep" ] && tar rf "$archive/$name.tar" -C "$work/$name" $keep
