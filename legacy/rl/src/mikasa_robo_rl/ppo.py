@@ -114,7 +114,8 @@ class PPOArgs:
     """with --resume: raise the policy's log std to at least this in every action dimension (an
     extension: re-opens the exploration of a run whose action noise has collapsed; default: keep)"""
     time_limit: float | None = None
-    """stop after the iteration that passes this many seconds, resume.pt saved (to chain time-limited jobs)"""
+    """stop after the iteration that passes this many seconds since the trainer started (env workers' start
+    included, so that a lent machine's call can be sized), resume.pt saved (to chain time-limited jobs)"""
 
 
 def observation_mode(args: PPOArgs) -> str:
@@ -355,6 +356,8 @@ class Run:
     """the loaded resume.pt of a ``--resume`` run"""
     saves: int = 0
     start_time: float = field(default_factory=time.time)
+    launched: float = field(default_factory=time.time)
+    """when the trainer began starting its env workers (``--time-limit`` counts from here)"""
     start_step: int = 0
     agent: torch.nn.Module | None = None
     optimizer: torch.optim.Optimizer | None = None
@@ -437,7 +440,7 @@ class Run:
                 self.save_dir / RESUME_FILE,
             )
         limit = self.args.time_limit
-        return limit is not None and time.time() - self.start_time >= limit and iteration < self.args.num_iterations
+        return limit is not None and time.time() - self.launched >= limit and iteration < self.args.num_iterations
 
     def stop_early(self) -> dict[str, float]:
         """End a run cut by ``--time-limit`` (no final eval); says how to go on."""
@@ -524,6 +527,10 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
+    # Timed because starting many workers is a lent machine's cost per call (64+64 took minutes).
+    launched = time.time()
     envs, eval_envs = make_envs(args, mode, num_envs, device, save_dir)
-    print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, device {device}")
-    return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir, resumed)
+    print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, "
+          f"device {device}; env workers ready in {time.time() - launched:.0f} s")
+    return Run(args, mode, num_envs, device, envs, eval_envs, RunLog(args, run_name, save_dir), save_dir, resumed,
+               launched=launched)
