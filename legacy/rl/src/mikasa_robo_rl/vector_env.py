@@ -189,8 +189,9 @@ def see_first_gpu_only() -> None:
     """Show this process only the first GPU it can see (``CUDA_VISIBLE_DEVICES``), before
     anything opens CUDA. ManiSkill's reset forks torch's RNG on every visible CUDA device
     (``torch.random.fork_rng``), so every env worker opened a CUDA context on each GPU of the
-    machine: 64 + 64 workers on a 4-GPU machine took ~3 minutes to start. A worker simulates on
-    the CPU and renders, if at all, on the first GPU, as it did when it saw them all."""
+    machine (on a 4-GPU machine, torch warned so once per worker, and 64 + 64 workers took ~3
+    minutes to start). A worker simulates on the CPU and renders, if at all, on the first GPU,
+    as it did when it saw them all."""
     visible = os.environ.get("CUDA_VISIBLE_DEVICES")
     if visible is None:
         os.environ["CUDA_VISIBLE_DEVICES"] = "0"
