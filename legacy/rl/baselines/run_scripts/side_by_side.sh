@@ -36,7 +36,7 @@ while read -r name trainer flags; do
   # the newest by time: a resume.pt copied in by hand may sort after the run's own by name
   resume=$(cd "$work/$name" && newest resume.pt 1)
   # shellcheck disable=SC2086  # the flags are words
-  (cd "$work/$name" && echo "== $(date +%T) start ${resume:+--resume $resume}" >>log.txt &&
+  (cd "$work/$name" && echo "== $(date '+%F %T') start ${resume:+--resume $resume}" >>log.txt &&
    exec "$python" "$root/legacy/rl/baselines/ppo/$trainer" $flags ${NUM_WORKERS:+--num-workers "$NUM_WORKERS"} ${resume:+--resume "$resume"} --time-limit "$limit" >>log.txt 2>&1) &
 done <"$runs_file"
 wait
