@@ -357,8 +357,6 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
 
 
 def test_shell_game_touch_diagnosis_reports_reach_and_shove_per_episode(tmp_path, monkeypatch, capsys):
-    from mikasa_robo_rl.agents import AgentStateOnly
-
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(47, 7).state_dict(), checkpoint)  # ShellGameTouch-VLA-v0: 47 state floats, 7-D ee action
     module = _load_script("diagnose_shell_game_touch", "legacy/rl/baselines")

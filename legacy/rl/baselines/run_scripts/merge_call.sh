@@ -14,7 +14,9 @@ tar xzf "$archive" -C "$unpacked"
 mkdir -p "$run"
 cat "$unpacked/log_call.txt" >>"$run/log.txt" && rm "$unpacked/log_call.txt"
 cp -a "$unpacked/." "$run/"
-newest=$(cd "$run" && find . -name resume.pt -printf '%T@ %p\n' | sort -n | tail -1 | cut -d' ' -f2-)
-[ -n "$newest" ] || { echo "no resume.pt under $run" >&2; exit 1; }
-echo "newest resume.pt: $run/${newest#./}"
-if [ -n "$copy_to" ]; then cp "$run/${newest#./}" "$copy_to" && echo "copied to $copy_to"; fi
+# shellcheck source=newest.sh
+source "$(dirname "$0")/newest.sh"
+latest=$(cd "$run" && newest resume.pt 1)
+[ -n "$latest" ] || { echo "no resume.pt under $run" >&2; exit 1; }
+echo "newest resume.pt: $run/${latest#./}"
+if [ -n "$copy_to" ]; then cp "$run/${latest#./}" "$copy_to" && echo "copied to $copy_to"; fi

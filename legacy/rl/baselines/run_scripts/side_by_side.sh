@@ -25,9 +25,8 @@ limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archiv
 root=$(pwd); python=${PYTHON:-python3}
 [[ "$python" == */* && "$python" != /* ]] && python="$root/$python"  # each run starts in its own directory
 export OMP_NUM_THREADS=1  # the env workers and trainers share the cores
-newest() {  # the COUNT newest files named PATTERN under the current directory, oldest first
-  find . -name "$1" -printf '%T@ %p\n' | sort -n | tail -"$2" | cut -d' ' -f2-
-}
+# shellcheck source=newest.sh
+source "$root/legacy/rl/baselines/run_scripts/newest.sh"
 names=(); declare -A log_start  # each run's log size before this call
 while read -r name trainer flags; do
   [[ -z "$name" || "$name" == \#* ]] && continue
