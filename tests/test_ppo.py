@@ -201,6 +201,23 @@ def test_lstm_trainer_rejects(ppo_lstm, tmp_path, monkeypatch, flags, error, mat
         ppo_lstm.main(["--env-id", ENV_ID, *flags, "--no-capture-video"])
 
 
+def _run_file_lines():
+    """(trainer, flags) of every run in the run files that side_by_side.sh takes."""
+    for path in sorted((ROOT / "legacy/rl/baselines/run_scripts").glob("*.txt")):
+        for line in path.read_text().splitlines():
+            if line.strip() and not line.startswith("#"):
+                name, trainer, *flags = line.split()
+                yield pytest.param(trainer, flags, id=f"{path.stem}:{name}")
+
+
+@pytest.mark.parametrize(("trainer", "flags"), list(_run_file_lines()))
+def test_run_file_lines_parse(ppo, ppo_lstm, trainer, flags):
+    # A mistyped or renamed flag fails here rather than minutes into a call on a lent machine.
+    module = {"ppo_memtasks.py": ppo, "ppo_memtasks_lstm.py": ppo_lstm}[trainer]
+    args = parse_args(module.Args, [*flags, "--time-limit", "60"])
+    assert args.env_id and observation_mode(args)
+
+
 # Each shipped checkpoint with its task's horizon (one eval episode per env). RESULTS.md:
 # RememberColor3-v0 1.00 over 96 episodes, ShellGameTouch-v0 0.93 over 256, RotateLenientPos-v0
 # 0.97 over 256, TakeItBack-v0 0.97 over 256, InterceptMedium-v0 0.95 over 256,
