@@ -378,11 +378,11 @@ class Run:
         agent.load_state_dict(state["agent"])
         optimizer.load_state_dict(state["optimizer"])
         # The command's --learning-rate wins over the saved one (Adam's moments are kept unless
-        # the reward scale changed, _rescale_values): a run can go on at a lower rate, where a
+        # the reward scale or --vf-coef changed, _adapt_to_new_units): a run can go on at a lower rate, where a
         # fresh optimizer from --checkpoint would first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
-        self._rescale_values(agent, optimizer, state.get("reward_scale"))
+        self._adapt_to_new_units(agent, optimizer, state.get("reward_scale"), state.get("vf_coef"))
         if self.args.resume_min_logstd is not None:
             with torch.no_grad():
                 agent.actor_logstd.clamp_(min=self.args.resume_min_logstd)
@@ -393,21 +393,31 @@ class Run:
         print(f"resumed {self.save_dir} after iteration {state['iteration']} (step {state['global_step']})")
         return state["iteration"] + 1, state["global_step"]
 
-    def _rescale_values(self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, saved: float | None) -> None:
-        """A run resumed at another ``--reward-scale`` than it was saved with (recorded in its
-        resume.pt since 2026-11-27): scale the critic's outputs to the new returns, and start the
-        optimizer's moments afresh. Without the first, the first updates would fit values off by
-        the ratio and their advantages would be noise. The moments are all in the old units: the
+    def _adapt_to_new_units(
+        self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, saved_scale: float | None,
+        saved_vf_coef: float | None,
+    ) -> None:
+        """A run resumed at another ``--reward-scale`` or ``--vf-coef`` than it was saved with
+        (recorded in its resume.pt since 2026-11-27 and 2026-11-29; an older one counts as
+        unchanged). Another reward scale: scale the critic's outputs to the new returns, or the
+        first updates would fit values off by the ratio and their advantages would be noise.
+        Either: start the optimizer's moments afresh. They are all in the old units: the
         critic's directly, the actor's through the one gradient-norm clip over both networks,
         whose factor the critic's gradient sets; kept, they made the first steps of a run resumed
-        at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01)."""
-        if saved is None or saved == self.args.reward_scale:
-            return
-        factor = self.args.reward_scale / saved
-        agent.scale_values(factor)
-        optimizer.state.clear()
-        print(f"--reward-scale {self.args.reward_scale} (saved with {saved}): critic outputs scaled by {factor:g}, "
-              "optimizer moments reset")
+        at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01), and a
+        critic whose loss weight fell 1,000-fold would creep for the ~1,000 Adam steps its second
+        moment takes to forget."""
+        new_scale = saved_scale is not None and saved_scale != self.args.reward_scale
+        new_vf_coef = saved_vf_coef is not None and saved_vf_coef != self.args.vf_coef
+        if new_scale:
+            factor = self.args.reward_scale / saved_scale
+            agent.scale_values(factor)
+            print(f"--reward-scale {self.args.reward_scale} (saved with {saved_scale}): critic outputs scaled by {factor:g}")
+        if new_vf_coef:
+            print(f"--vf-coef {self.args.vf_coef} (saved with {saved_vf_coef})")
+        if new_scale or new_vf_coef:
+            optimizer.state.clear()
+            print("optimizer moments reset")
 
     def save(self, agent: torch.nn.Module, name: str | None = None, iteration: int | None = None) -> None:
         """Checkpoint ``agent`` (with ``--save-model``): ``name``, or the next periodic
@@ -435,6 +445,7 @@ class Run:
                 dict(agent=self.agent.state_dict(), optimizer=self.optimizer.state_dict(), iteration=iteration,
                      global_step=global_step, saves=self.saves, save_dir=str(self.save_dir),
                      env_id=self.args.env_id, mode=self.mode, reward_scale=self.args.reward_scale,
+                     vf_coef=self.args.vf_coef,
                      torch_rng=torch.get_rng_state(),
                      numpy_rng=np.random.get_state()),
                 self.save_dir / RESUME_FILE,
