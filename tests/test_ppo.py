@@ -281,41 +281,36 @@ def test_resume_with_a_larger_batch_goes_on_to_the_total_steps(ppo, tmp_path, mo
     assert (state["iteration"], state["global_step"]) == (2, 48)
 
 
-def test_resume_at_another_reward_scale_scales_the_critics_values(ppo, tmp_path, monkeypatch, capsys):
-    # Saved at --reward-scale 1 after iteration 1; going on at 0.01 with no step left to train
-    # (total = the saved step) writes final_ckpt.pt straight from the restored agent.
+@pytest.mark.parametrize(
+    "flag, value, printed, critic_factor",
+    [
+        ("--reward-scale", "0.01", "critic outputs scaled by 0.01", 0.01),
+        ("--vf-coef", "0.0005", "--vf-coef 0.0005 (saved with 0.5)", 1.0),
+    ],
+)
+def test_resume_in_other_units_adapts_the_critic_and_resets_adam(
+    ppo, tmp_path, monkeypatch, capsys, flag, value, printed, critic_factor
+):
+    # Saved after iteration 1 at --reward-scale 1, --vf-coef 0.5; going on at another value with
+    # no step left to train (total = the saved step) writes final_ckpt.pt straight from the
+    # restored agent. Another reward scale scales the critic's outputs; either starts Adam's
+    # moments afresh (their units changed: the critic's directly, the actor's through the clip).
     monkeypatch.chdir(tmp_path)
     flags = ["--env-id", ENV_ID, "--include-state", *TINY]
     ppo.main([*flags, "--time-limit", "0"])
     (resume_file,) = tmp_path.rglob("resume.pt")
     saved = torch.load(resume_file, weights_only=False)
-    assert saved["reward_scale"] == 1.0
-    ppo.main([*flags, "--resume", str(resume_file), "--reward-scale", "0.01", "--total-timesteps", "16"])
+    assert (saved["reward_scale"], saved["vf_coef"]) == (1.0, 0.5)
+    ppo.main([*flags, "--resume", str(resume_file), flag, value, "--total-timesteps", "16"])
     out = capsys.readouterr().out
-    assert "critic outputs scaled by 0.01" in out and "optimizer moments reset" in out
+    assert printed in out and "optimizer moments reset" in out
+    assert ("critic outputs scaled" in out) == (critic_factor != 1.0)
     (final,) = tmp_path.rglob("final_ckpt.pt")
     head = torch.load(final, weights_only=True)
     for name in ("critic.6.weight", "critic.6.bias"):
-        torch.testing.assert_close(head[name], saved["agent"][name] * 0.01)
-    torch.testing.assert_close(head["critic.4.weight"], saved["agent"]["critic.4.weight"])
-    torch.testing.assert_close(head["actor_mean.6.weight"], saved["agent"]["actor_mean.6.weight"])
-
-
-def test_resume_at_another_vf_coef_resets_the_optimizer_only(ppo, tmp_path, monkeypatch, capsys):
-    # The critic's loss weight sets its gradient's units (and, through the shared clip, the
-    # actor's): Adam's moments start afresh, the networks are kept as saved.
-    monkeypatch.chdir(tmp_path)
-    flags = ["--env-id", ENV_ID, "--include-state", *TINY]
-    ppo.main([*flags, "--time-limit", "0"])
-    (resume_file,) = tmp_path.rglob("resume.pt")
-    saved = torch.load(resume_file, weights_only=False)
-    assert saved["vf_coef"] == 0.5
-    ppo.main([*flags, "--resume", str(resume_file), "--vf-coef", "0.0005", "--total-timesteps", "16"])
-    out = capsys.readouterr().out
-    assert "--vf-coef 0.0005 (saved with 0.5)" in out and "optimizer moments reset" in out
-    assert "critic outputs scaled" not in out
-    (final,) = tmp_path.rglob("final_ckpt.pt")
-    torch.testing.assert_close(torch.load(final, weights_only=True)["critic.6.weight"], saved["agent"]["critic.6.weight"])
+        torch.testing.assert_close(head[name], saved["agent"][name] * critic_factor)
+    for name in ("critic.4.weight", "actor_mean.6.weight"):
+        torch.testing.assert_close(head[name], saved["agent"][name])
 
 
 def test_head_grad_norms_split_the_gradient_between_policy_and_critic():

@@ -377,9 +377,9 @@ class Run:
         state = self.resumed
         agent.load_state_dict(state["agent"])
         optimizer.load_state_dict(state["optimizer"])
-        # The command's --learning-rate wins over the saved one (Adam's moments are kept unless
-        # the reward scale or --vf-coef changed, _adapt_to_new_units): a run can go on at a lower rate, where a
-        # fresh optimizer from --checkpoint would first take full-size steps in every weight.
+        # The command's --learning-rate wins over the saved one (Adam's moments are kept unless the
+        # reward scale or --vf-coef changed, _adapt_to_new_units): a run can go on at a lower rate,
+        # where a fresh optimizer from --checkpoint would first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
         self._adapt_to_new_units(agent, optimizer, state.get("reward_scale"), state.get("vf_coef"))
@@ -405,8 +405,8 @@ class Run:
         critic's directly, the actor's through the one gradient-norm clip over both networks,
         whose factor the critic's gradient sets; kept, they made the first steps of a run resumed
         at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01), and a
-        critic whose loss weight fell 1,000-fold would creep for the ~1,000 Adam steps its second
-        moment takes to forget."""
+        critic whose loss weight fell 1,000-fold would barely move for the ~14,000 Adam steps its
+        second moment (β2 0.999) takes to forget the old gradients' squares."""
         new_scale = saved_scale is not None and saved_scale != self.args.reward_scale
         new_vf_coef = saved_vf_coef is not None and saved_vf_coef != self.args.vf_coef
         if new_scale:
