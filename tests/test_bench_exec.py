@@ -5,6 +5,7 @@ encoding, files written by the runner and linked by the report) on a fake env.""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -102,6 +103,32 @@ def test_cpu_rendering_workers_see_only_lavapipe(tmp_path, monkeypatch):
     config = BenchmarkConfig(render_device="cpu", gpu_render_workers=1)
     assert "VK_ICD_FILENAMES" not in worker_env_vars(config, 0, 2)
     assert worker_env_vars(config, 1, 2)["VK_ICD_FILENAMES"] == str(icd)
+
+
+@pytest.mark.parametrize(
+    ("visible", "device_nodes", "index", "seen"),
+    [
+        (None, 2, 0, "0"),
+        (None, 2, 3, "1"),  # round robin over the machine's GPUs
+        (None, 0, 1, None),  # no GPU: nothing set
+        ("2,3", 0, 1, "3"),
+        (" 1 , 0", 0, 0, "1"),
+        ("0,-1,1", 0, 1, "0"),  # CUDA reads up to the first invalid entry
+        ("", 2, 0, ""),
+        ("-1", 2, 0, "-1"),
+    ],
+)
+def test_pool_workers_see_one_gpu_each(monkeypatch, visible, device_nodes, index, seen):
+    # ManiSkill's reset forks torch's RNG on every visible GPU: a worker must see one (or none).
+    from mikasa_envs import workers
+
+    monkeypatch.setattr(workers.glob, "glob", lambda _: [f"/dev/nvidia{i}" for i in range(device_nodes)])
+    if visible is None:
+        monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
+    else:
+        monkeypatch.setenv("CUDA_VISIBLE_DEVICES", visible)
+    workers.use_one_gpu(index)
+    assert os.environ.get("CUDA_VISIBLE_DEVICES") == seen
 
 
 def test_one_pool_needs_one_render_setting():

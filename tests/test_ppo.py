@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import os
 import sys
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import pytest
 import torch
 from mikasa_robo_rl.agents import AgentStateOnly
 from mikasa_robo_rl.ppo import PPOArgs, observation_mode, parse_args
-from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec, see_first_gpu_only
+from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,17 +83,6 @@ def test_trainers_normalized_dense_is_upstreams_unclipped_dense_over_its_divisor
     torch.testing.assert_close(rewards["normalized_dense"], rewards["dense"] / divisor)
     if env_id == ENV_ID:  # random actions' smoothness penalty outweighs the rest: below the envs' [0, 1] clip
         assert (rewards["normalized_dense"] < 0).any()
-
-
-@pytest.mark.parametrize(("visible", "seen"), [(None, "0"), ("2,3", "2"), (" 1 , 0", "1"), ("", ""), ("-1", "-1")])
-def test_env_workers_see_the_first_visible_gpu_only(monkeypatch, visible, seen):
-    # ManiSkill's reset forks torch's RNG on every visible GPU: a worker must see one (or none).
-    if visible is None:
-        monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
-    else:
-        monkeypatch.setenv("CUDA_VISIBLE_DEVICES", visible)
-    see_first_gpu_only()
-    assert os.environ["CUDA_VISIBLE_DEVICES"] == seen
 
 
 def test_vector_env_rejects_bad_actions():

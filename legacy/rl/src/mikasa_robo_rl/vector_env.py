@@ -30,7 +30,7 @@ import numpy as np
 import torch
 from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
-__all__ = ["CpuVectorEnv", "SubEnvSpec", "default_vector_workers", "see_first_gpu_only"]
+__all__ = ["CpuVectorEnv", "SubEnvSpec", "default_vector_workers"]
 
 
 def default_vector_workers(num_envs: int) -> int:
@@ -185,24 +185,10 @@ def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int) -> _SubEnvs:
     return _SubEnvs(spec, count, first_index)
 
 
-def see_first_gpu_only() -> None:
-    """Show this process only the first GPU it can see (``CUDA_VISIBLE_DEVICES``), before
-    anything opens CUDA. ManiSkill's reset forks torch's RNG on every visible CUDA device
-    (``torch.random.fork_rng``), so every env worker opened a CUDA context on each GPU of the
-    machine (on a 4-GPU machine, torch warned so once per worker, and 64 + 64 workers took ~3
-    minutes to start). A worker simulates on the CPU and renders, if at all, on the first GPU,
-    as it did when it saw them all."""
-    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
-    if visible is None:
-        os.environ["CUDA_VISIBLE_DEVICES"] = "0"
-    elif visible.strip() not in ("", "-1"):
-        os.environ["CUDA_VISIBLE_DEVICES"] = visible.split(",")[0].strip()
-
-
 def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, first_index: int, inbox: Any, outbox: Any) -> None:
-    from mikasa_envs.workers import serve_jobs
+    from mikasa_envs.workers import serve_jobs, use_one_gpu
 
-    see_first_gpu_only()
+    use_one_gpu(worker_id)  # a CUDA context on one GPU, not on each (its docstring says why)
     serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index))
 
 

@@ -332,8 +332,10 @@ def _worker_main(
     """Entry point of a `LocalExecutor` worker process (one or more workers, a thread each)."""
     # Before anything can initialise Vulkan: the render device's driver restriction.
     apply_environment(env_vars)
-    from mikasa_envs.workers import serve_job_slots  # imported lazily: mikasa_envs loads ManiSkill
+    # imported lazily: mikasa_envs loads ManiSkill
+    from mikasa_envs.workers import serve_job_slots, use_one_gpu
 
+    use_one_gpu(process_index)  # a CUDA context on one GPU, not on each; spreads GPU rendering
     start = partial(_start_worker, process_index, len(worker_ids) > 1)
     serve_job_slots(worker_ids, inboxes, outbox, start)
 

@@ -250,11 +250,14 @@ def render_task(
 
 def _init_worker(worker_config: BenchmarkConfig, n_workers: int) -> None:
     """Each worker renders as the bench's pool workers do (`worker_env_vars`: its device,
-    its share of the cores)."""
+    its share of the cores, one GPU)."""
     from .executor import worker_env_vars
     from .render import apply_environment
 
     apply_environment(worker_env_vars(worker_config, 0, n_workers))
+    from mikasa_envs.workers import use_one_gpu  # after the Vulkan restriction: loads ManiSkill
+
+    use_one_gpu(0)
 
 
 def build_gallery(

@@ -242,7 +242,9 @@ def _env_main(
 ) -> None:
     """Entry point of an env process."""
     apply_environment(env_vars)  # before anything can initialise Vulkan
-    from mikasa_envs.workers import serve_jobs
+    from mikasa_envs.workers import serve_jobs, use_one_gpu
+
+    use_one_gpu(process_index)  # a CUDA context on one GPU, not on each; spreads GPU rendering
 
     serve_jobs(process_index, inbox, outbox, partial(_start_env_slots, process_index, slots))
 

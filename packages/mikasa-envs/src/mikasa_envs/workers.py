@@ -11,6 +11,7 @@ state (`serve_job_slots`): their envs then share GPU render passes (`render_batc
 
 from __future__ import annotations
 
+import glob
 import logging
 import multiprocessing as mp
 import os
@@ -22,7 +23,15 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-__all__ = ["JobRunner", "quiet_worker", "serve_job_slots", "serve_jobs", "stop_processes"]
+__all__ = [
+    "JobRunner",
+    "quiet_worker",
+    "serve_job_slots",
+    "serve_jobs",
+    "stop_processes",
+    "use_one_gpu",
+    "visible_gpus",
+]
 
 
 class JobRunner(Protocol):
@@ -51,6 +60,35 @@ def quiet_worker(*, one_raster_thread: bool = True) -> None:
     # imported, so this has to come after the import.
     for name in ("mani_skill ", "mani_skill"):
         logging.getLogger(name).setLevel(logging.ERROR)
+
+
+def visible_gpus() -> list[str]:
+    """The CUDA devices this process may use, as ``CUDA_VISIBLE_DEVICES`` entries, found
+    without initialising CUDA: that variable's entries when it is set (as CUDA reads it, up
+    to the first empty or ``-1`` entry), else one index per NVIDIA device node
+    (``/dev/nvidia0``, ``/dev/nvidia1``, ...; a container shows only the GPUs it was given)."""
+    given = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if given is not None:
+        gpus: list[str] = []
+        for entry in given.split(","):
+            if entry.strip() in ("", "-1"):
+                break
+            gpus.append(entry.strip())
+        return gpus
+    return [str(i) for i in range(len(glob.glob("/dev/nvidia[0-9]*")))]
+
+
+def use_one_gpu(process_index: int) -> None:
+    """Show this worker process one GPU, the ``process_index``-th (round robin) of those it
+    can see, before anything initialises CUDA (importing torch or ManiSkill does not).
+
+    ManiSkill's reset forks torch's RNG on every visible CUDA device
+    (``torch.random.fork_rng``), so a worker that saw all GPUs opened a CUDA context on each
+    (on a 4-GPU machine, 128 env workers took ~3 minutes to start). Round robin spreads the
+    workers' GPU rendering over the machine's GPUs. No GPU visible: nothing changes."""
+    gpus = visible_gpus()
+    if gpus:
+        os.environ["CUDA_VISIBLE_DEVICES"] = gpus[process_index % len(gpus)]
 
 
 def serve_jobs(worker_id: int, inbox: Any, outbox: Any, start: Callable[[], JobRunner]) -> None:

@@ -109,6 +109,7 @@ def _start_runner(
 
 
 def _worker_main(
+    process_index: int,
     worker_ids: list[int],
     runner_args: tuple[Any, ...],
     jobs: Any,
@@ -118,8 +119,10 @@ def _worker_main(
     """Entry point of a spawn-started process: one runner per id of ``worker_ids`` (a thread
     each when there are several), each running jobs (seeds) from the shared ``jobs`` queue
     until it gets ``None``."""
-    from mikasa_envs.workers import serve_job_slots  # imported lazily: mikasa_envs loads ManiSkill
+    # imported lazily: mikasa_envs loads ManiSkill
+    from mikasa_envs.workers import serve_job_slots, use_one_gpu
 
+    use_one_gpu(process_index)  # a CUDA context on one GPU, not on each; spreads GPU rendering
     start = partial(_start_runner, runner_args, factory)
     serve_job_slots(worker_ids, [jobs] * len(worker_ids), results, lambda _wid: start())
 
@@ -157,6 +160,7 @@ class ProcessPool:
             ctx.Process(
                 target=_worker_main,
                 args=(
+                    w,
                     list(range(w * envs_per_worker, (w + 1) * envs_per_worker)),
                     runner_args,
                     self.jobs,
