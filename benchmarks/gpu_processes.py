@@ -40,6 +40,14 @@ def _query(kind: str, fields: str) -> list[list[str]]:
     return [[c.strip() for c in line.split(",")] for line in out.splitlines() if line.strip()]
 
 
+def _number(text: str) -> float:
+    """A figure of nvidia-smi's (0 where it says ``[N/A]`` or the like)."""
+    try:
+        return float(text)
+    except ValueError:
+        return 0.0
+
+
 def sample_while(command: list[str], every_s: float) -> dict[str, Any]:
     """Run ``command`` and sample the GPUs every ``every_s`` seconds until it exits."""
     gpus = {uuid: int(index) for uuid, index in _query("gpu", "uuid,index")}
@@ -51,10 +59,10 @@ def sample_while(command: list[str], every_s: float) -> dict[str, Any]:
     child = subprocess.Popen(command)
     while child.poll() is None:
         for uuid, u in _query("gpu", "uuid,utilization.gpu"):
-            util[gpus.get(uuid, -1)].append(float(u))
+            util[gpus.get(uuid, -1)].append(_number(u))
         procs: dict[int, list[float]] = defaultdict(list)
         for uuid, pid, mem in _query("compute-apps", "gpu_uuid,pid,used_memory"):
-            procs[gpus.get(uuid, -1)].append(float(mem))
+            procs[gpus.get(uuid, -1)].append(_number(mem))
             gpus_of_pid[pid].add(gpus.get(uuid, -1))
         for gpu, mems in procs.items():
             peak_procs[gpu] = max(peak_procs[gpu], len(mems))
