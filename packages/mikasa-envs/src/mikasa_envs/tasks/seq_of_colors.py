@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import OrderedColorSequenceVLABaseEnv
+from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
 
 
 class SeqOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
