@@ -34,6 +34,22 @@ def read_curves(path: Path, tags: tuple[str, ...] = TAGS) -> dict[str, list[tupl
     return {tag: sorted(points.items()) for tag, points in curves.items()}
 
 
+def curves_json(curves: dict[str, dict[str, list[tuple[int, float]]]]) -> str:
+    """The points as JSON, one line per run and tag (a redraw of a grown run then changes a few
+    lines, not one per number), values at float32's 7 significant digits (TensorBoard stores
+    float32, so nothing is lost)."""
+    def points(values: list[tuple[int, float]]) -> str:
+        return json.dumps([[step, float(f"{value:.7g}")] for step, value in values])
+
+    runs = [
+        f"  {json.dumps(label)}: {{\n"
+        + ",\n".join(f"    {json.dumps(tag)}: {points(values)}" for tag, values in tags.items())
+        + "\n  }"
+        for label, tags in curves.items()
+    ]
+    return "{\n" + ",\n".join(runs) + "\n}\n"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -80,7 +96,7 @@ def main() -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out.with_suffix(".png"), dpi=100)
-    out.with_suffix(".json").write_text(json.dumps(curves, indent=1))
+    out.with_suffix(".json").write_text(curves_json(curves))
 
 
 if __name__ == "__main__":
