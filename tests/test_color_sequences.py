@@ -289,15 +289,19 @@ def test_strong_displacement_blocks_success(make_env):
     assert float(info["max_cube_displacement_xy"][0]) > 0.06
 
 
-def test_displacement_before_the_press_ends_the_reaching_reward(make_env):
+def test_displacement_before_the_press_ends_the_reaching_and_touch_rewards(make_env):
     env, base = _oracle_until_pressable(make_env)
-    *_, info = env.step(ZERO)
+    _, reward_clean, *_, info = env.step(ZERO)
     assert float(info["reward_dict"]["reaching_reward"][0]) > 0.0  # aiming at the button
     _push_a_non_target_cube(base)
     env.step(ZERO)
-    *_, info = env.step(ZERO)  # reward_dict is the previous step's
+    _, reward_shoved, *_, info = env.step(ZERO)  # reward_dict is the previous step's
     assert not bool(info["button_pressable"][0]) and not info["obj_to_goal_pos"].any()
+    # No goal left: no reaching term (DEVIATIONS.md Fixed #30); a cube pushed > 6 cm: no touch
+    # term either (Fixed #32), so the step earns at most the static term's 0.5, not 90 + 0.5.
     assert float(info["reward_dict"]["reaching_reward"][0]) == 0.0
+    assert int(info["reward_dict"]["correct_touches"][0]) == 3
+    assert 0.0 < float(reward_shoved[0]) < float(reward_clean[0]) / 150
 
 
 def test_touches_during_the_cue_do_not_count(make_env):

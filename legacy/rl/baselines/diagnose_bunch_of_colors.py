@@ -1,5 +1,6 @@
 """What a BunchOfColors / SeqOfColors / ChainOfColors PPO state policy does per episode:
-how many of the shown cubes it touched, how many others, how near the button it came once
+how many of the shown cubes it touched, how many others, how far it moved a cube (more than
+``STRONG_DISPLACEMENT_XY``, 6 cm, and the button can no longer be pressed), how near the button it came once
 the button could be pressed (the shown cubes and no other touched), how far from it it ended,
 whether a press registered (the TCP low over the button while pressable), how high the TCP
 ended against the height that confirms that press, and whether it was confirmed (success needs
@@ -37,6 +38,7 @@ def main() -> None:
         registered_at = confirm_at = None  # TCP heights: where a press registered, what confirms it
         pressable_from = None  # the first step at which the button could be pressed
         nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
+        max_shove = 0.0  # the farthest any cube got from its layout point (xy; > 6 cm forbids the press)
         for step in range(env.unwrapped.spec.max_episode_steps or 120):
             with torch.no_grad():
                 action = agent.get_action(flatten_state_obs(obs), deterministic=True)
@@ -50,6 +52,7 @@ def main() -> None:
                     pressable_from = step
                 nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
+            max_shove = max(max_shove, float(info["max_cube_displacement_xy"][0]))
             latch = env.unwrapped.press_latch
             if bool(latch.pending[0]) and registered_at is None:
                 registered_at, confirm_at = float(latch.press_start_z[0]), float(latch.confirm_z[0])
@@ -60,7 +63,8 @@ def main() -> None:
         tcp_z = float(env.unwrapped.agent.tcp.pose.p[0, 2])
         press = ("no press registered" if registered_at is None else
                  f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}")
-        print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, {button}, "
+        print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
+              f"a cube moved up to {max_shove:.3f} m, {button}, "
               f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
               f"pressed {pressed}")
     env.close()

@@ -490,7 +490,9 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
 
     # ----------------------------------------------------------------- reward
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        """A·(reaching + 0.5·static + touch terms − displacement penalty); 400 on success."""
+        """A·(reaching + 0.5·static + touch terms − displacement penalty); 400 on success.
+        No reaching term once no goal is left, no touch term while a cube lies pushed more than
+        6 cm (DEVIATIONS.md Fixed #30, #32)."""
         in_action = self.phase_masks(self.elapsed_steps)[2]
         distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
         # Upstream's goal vector is zero once no goal is left short of the press (a wrong touch,
@@ -503,6 +505,11 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         static = 1 - torch.tanh(5 * qvel_l2)
         correct, wrong = self._touch_counts()
         correct_reward = self.CORRECT_TOUCH_REWARD * correct.float() / self.SEQUENCE_LENGTH
+        # Upstream pays the touch term on while a cube lies pushed more than 6 cm, which forbids
+        # the press and success: 90 a step for the touched targets against the ~1 a step that care
+        # and the way to the button earn, so a policy that touches them by sweeping through the
+        # cubes loses nothing (DEVIATIONS.md Fixed #32). Such a step earns no touch term.
+        correct_reward = torch.where(info["strong_cube_displacement"], torch.zeros_like(correct_reward), correct_reward)
         wrong_penalty = self.WRONG_TOUCH_PENALTY * wrong.float()
         action_l2, delta_l2 = self._action_smoothness_terms(action)
         smooth = self.ACTION_L2_COEF * action_l2 + self.ACTION_DELTA_L2_COEF * delta_l2 + self.QVEL_L2_COEF * qvel_l2
