@@ -36,8 +36,8 @@ def read_curves(path: Path, tags: tuple[str, ...] = TAGS) -> dict[str, list[tupl
 
 def curves_json(curves: dict[str, dict[str, list[tuple[int, float]]]]) -> str:
     """The points as JSON, one line per run and tag (a redraw of a grown run then changes a few
-    lines, not one per number), values at float32's 7 significant digits (TensorBoard stores
-    float32, so nothing is lost)."""
+    lines, not one per number), values at 7 significant digits (TensorBoard stores float32,
+    good to about 7; a curve needs fewer)."""
     def points(values: list[tuple[int, float]]) -> str:
         return json.dumps([[step, float(f"{value:.7g}")] for step, value in values])
 
