@@ -385,3 +385,23 @@ def test_shell_game_touch_diagnosis_reports_reach_and_shove_per_episode(tmp_path
     # An untrained policy stays near its start pose: no mug within 8 cm, none shoved.
     assert episode.startswith("seed 100: success 0, within 8 cm from step None")
     assert summary.startswith("success 0/1, within 8 cm 0/1, shoved > 0.05 m 0/1")
+
+
+def test_plot_curves_replaces_its_png_and_json_whole(tmp_path, monkeypatch):
+    import json
+
+    from torch.utils.tensorboard import SummaryWriter
+
+    run = tmp_path / "run"
+    with SummaryWriter(run) as writer:
+        for step, value in [(0, 1.0), (100, 2.5), (200, 0.125)]:
+            writer.add_scalar("eval/return", value, step)
+    out = tmp_path / "curves" / "demo"
+    out.parent.mkdir()
+    out.with_suffix(".json").write_text("{}")  # a curve shipped before: replaced, not appended to
+    module = _load_script("plot_curves", "legacy/rl/baselines")
+    monkeypatch.setattr(sys, "argv", ["plot", str(run), "--labels", "demo", "--tags", "eval/return", "--out", str(out)])
+    module.main()
+    assert json.loads(out.with_suffix(".json").read_text()) == {"demo": {"eval/return": [[0, 1.0], [100, 2.5], [200, 0.125]]}}
+    assert out.with_suffix(".png").read_bytes().startswith(b"\x89PNG")
+    assert sorted(p.name for p in out.parent.iterdir()) == ["demo.json", "demo.png"]  # no temporary left

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+from collections.abc import Callable
 from pathlib import Path
 
 TAGS = ("eval/success_once", "eval/return")
@@ -48,6 +50,14 @@ def curves_json(curves: dict[str, dict[str, list[tuple[int, float]]]]) -> str:
         for label, tags in curves.items()
     ]
     return "{\n" + ",\n".join(runs) + "\n}\n"
+
+
+def write_replacing(path: Path, write: Callable[[Path], object]) -> None:
+    """Write ``path`` through a temporary file beside it, so that a failed or interrupted write
+    leaves the curve shipped before it whole."""
+    tmp = path.with_name(path.name + ".tmp")
+    write(tmp)
+    os.replace(tmp, path)
 
 
 def main() -> None:
@@ -95,8 +105,9 @@ def main() -> None:
     fig.tight_layout(rect=(0, 0.07 * rows, 1, 1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out.with_suffix(".png"), dpi=100)
-    out.with_suffix(".json").write_text(curves_json(curves))
+    text = curves_json(curves)
+    write_replacing(out.with_suffix(".png"), lambda tmp: fig.savefig(tmp, dpi=100, format="png"))
+    write_replacing(out.with_suffix(".json"), lambda tmp: tmp.write_text(text))
 
 
 if __name__ == "__main__":
