@@ -26,6 +26,7 @@ from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
     BUTTON_CAP_HALF_LENGTH,
     BUTTON_TOP_Z,
+    CONFIRM_LIFT,
     MAX_PRESS_DEPTH,
     Button,
     PressLatch,
@@ -94,6 +95,9 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     LIFT_GOAL_MARGIN: ClassVar[float] = 0.01
 
     CORRECT_TOUCH_REWARD: ClassVar[float] = 90.0
+    # Paid for the rise that confirms a registered press, in proportion to it, and in full once
+    # confirmed (DEVIATIONS.md Fixed #33): as much as the touches, so the rise is seen beside them.
+    LIFT_REWARD: ClassVar[float] = 90.0
     WRONG_TOUCH_PENALTY: ClassVar[float] = 10.0
     DISPLACEMENT_PENALTY: ClassVar[float] = 20.0
     # Smoothness coefficients (‖a‖, ‖Δa‖, ‖qvel‖) are all 0 in these families.
@@ -421,6 +425,14 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         lift_goal = torch.cat([self.button.xy, lift_z[:, None]], dim=-1)
         return torch.where(self.press_latch.pending[:, None], lift_goal, self.button_goal)
 
+    def _lift_progress(self) -> torch.Tensor:
+        """(B,) how much of the press is done: 0 before a press registers, then the share of the
+        rise that confirms it (clipped to [0, 1]), 1 once confirmed (so confirming loses nothing)."""
+        latch = self.press_latch
+        rise = (self.agent.tcp.pose.p[:, 2] - latch.press_start_z) / CONFIRM_LIFT
+        rising = torch.where(latch.pending, rise.clamp(0.0, 1.0), torch.zeros_like(rise))
+        return torch.where(self.button_pressed, torch.ones_like(rise), rising)
+
     def _aims_at_goal(self) -> torch.Tensor:
         """(B,) whether ``obj_to_goal_pos`` aims anywhere: a next target, or the button while
         it is pressable and not yet pressed."""
@@ -490,9 +502,9 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
 
     # ----------------------------------------------------------------- reward
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        """A·(reaching + 0.5·static + touch terms − displacement penalty); 400 on success.
-        No reaching term once no goal is left, no touch term while a cube lies pushed more than
-        6 cm (DEVIATIONS.md Fixed #30, #32)."""
+        """A·(reaching + 0.5·static + touch terms + lift term − displacement penalty); 400 on
+        success. No reaching term once no goal is left, no touch or lift term while a cube lies
+        pushed more than 6 cm (DEVIATIONS.md Fixed #30, #32, #33)."""
         in_action = self.phase_masks(self.elapsed_steps)[2]
         distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
         # Upstream's goal vector is zero once no goal is left short of the press (a wrong touch,
@@ -510,12 +522,18 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         # and the way to the button earn, so a policy that touches them by sweeping through the
         # cubes loses nothing (DEVIATIONS.md Fixed #32). Such a step earns no touch term.
         correct_reward = torch.where(info["strong_cube_displacement"], torch.zeros_like(correct_reward), correct_reward)
+        # Upstream pays nothing for the rise of CONFIRM_LIFT that confirms a press but the reaching
+        # term, at most 1 a step against the touch term's 90: PPO learnt to press and then hovered
+        # 3 cm up (DEVIATIONS.md Fixed #33). The lift term pays for the rise, not while a cube lies
+        # pushed more than 6 cm (no success can follow).
+        lift_reward = self.LIFT_REWARD * self._lift_progress()
+        lift_reward = torch.where(info["strong_cube_displacement"], torch.zeros_like(lift_reward), lift_reward)
         wrong_penalty = self.WRONG_TOUCH_PENALTY * wrong.float()
         action_l2, delta_l2 = self._action_smoothness_terms(action)
         smooth = self.ACTION_L2_COEF * action_l2 + self.ACTION_DELTA_L2_COEF * delta_l2 + self.QVEL_L2_COEF * qvel_l2
         displacement_penalty = self.DISPLACEMENT_PENALTY * self._mean_displacement
         reward = in_action.float() * (
-            reaching + 0.5 * static + correct_reward - wrong_penalty - smooth - displacement_penalty
+            reaching + 0.5 * static + correct_reward + lift_reward - wrong_penalty - smooth - displacement_penalty
         )
         reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
         self._reward_dict = {
