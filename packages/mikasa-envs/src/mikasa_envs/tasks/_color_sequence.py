@@ -517,23 +517,23 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         static = 1 - torch.tanh(5 * qvel_l2)
         correct, wrong = self._touch_counts()
         correct_reward = self.CORRECT_TOUCH_REWARD * correct.float() / self.SEQUENCE_LENGTH
+        # Upstream pays nothing for the rise of CONFIRM_LIFT that confirms a press but the reaching
+        # term, at most 1 a step against the touch term's 90: PPO learnt to press and then hovered
+        # 3 cm up (DEVIATIONS.md Fixed #33). The lift term pays for the rise.
+        lift_reward = self.LIFT_REWARD * self._lift_progress()
         # Upstream pays the touch term on while a cube lies pushed more than 6 cm, which forbids
         # the press and success: 90 a step for the touched targets against the ~1 a step that care
         # and the way to the button earn, so a policy that touches them by sweeping through the
-        # cubes loses nothing (DEVIATIONS.md Fixed #32). Such a step earns no touch term.
-        correct_reward = torch.where(info["strong_cube_displacement"], torch.zeros_like(correct_reward), correct_reward)
-        # Upstream pays nothing for the rise of CONFIRM_LIFT that confirms a press but the reaching
-        # term, at most 1 a step against the touch term's 90: PPO learnt to press and then hovered
-        # 3 cm up (DEVIATIONS.md Fixed #33). The lift term pays for the rise, not while a cube lies
-        # pushed more than 6 cm (no success can follow).
-        lift_reward = self.LIFT_REWARD * self._lift_progress()
-        lift_reward = torch.where(info["strong_cube_displacement"], torch.zeros_like(lift_reward), lift_reward)
+        # cubes loses nothing (DEVIATIONS.md Fixed #32). Such a step earns no touch or lift term.
+        progress_reward = torch.where(
+            info["strong_cube_displacement"], torch.zeros_like(correct_reward), correct_reward + lift_reward
+        )
         wrong_penalty = self.WRONG_TOUCH_PENALTY * wrong.float()
         action_l2, delta_l2 = self._action_smoothness_terms(action)
         smooth = self.ACTION_L2_COEF * action_l2 + self.ACTION_DELTA_L2_COEF * delta_l2 + self.QVEL_L2_COEF * qvel_l2
         displacement_penalty = self.DISPLACEMENT_PENALTY * self._mean_displacement
         reward = in_action.float() * (
-            reaching + 0.5 * static + correct_reward + lift_reward - wrong_penalty - smooth - displacement_penalty
+            reaching + 0.5 * static + progress_reward - wrong_penalty - smooth - displacement_penalty
         )
         reward = torch.where(info["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
         self._reward_dict = {
