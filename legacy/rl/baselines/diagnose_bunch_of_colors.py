@@ -7,10 +7,12 @@ ended against the height that confirms that press, and whether it was confirmed 
 exactly the shown cubes touched, then a confirmed press).
 
     python legacy/rl/baselines/diagnose_bunch_of_colors.py CKPT [--env-id BunchOfColors3-v0] [--episodes 8]
+        [--sample [--min-logstd -1.6] [--first-seed 1000]]
 
 CKPT: a ``ppo_memtasks.py`` state checkpoint (``ckpt_*.pt`` or ``final_ckpt.pt``). Deterministic
-actions, dense reward mode, seeds 100.. (not the canonical evaluation seeds). Prints one line
-per episode.
+actions (``--sample``: sampled from the policy, as in training, torch seed 0; ``--min-logstd``
+floors its log std first, to see whether more noise would find what the mean misses), dense
+reward mode, seeds 100.. (not the canonical evaluation seeds). Prints one line per episode.
 """
 
 from __future__ import annotations
@@ -27,21 +29,31 @@ def main() -> None:
     parser.add_argument("checkpoint", help="a ppo_memtasks.py state checkpoint")
     parser.add_argument("--env-id", default="BunchOfColors3-v0", help="an RL colour-set id (default BunchOfColors3-v0)")
     parser.add_argument("--episodes", type=int, default=8, help="episodes (default 8)")
+    parser.add_argument("--first-seed", type=int, default=100, help="the first episode's seed (default 100)")
+    parser.add_argument("--sample", action="store_true", help="sample actions instead of taking the mean")
+    parser.add_argument("--min-logstd", type=float, default=None, help="with --sample: floor the policy's log std")
     args = parser.parse_args()
+    if args.min_logstd is not None and not args.sample:
+        parser.error("--min-logstd changes only sampled actions: add --sample")
     agent = load_agent(args.checkpoint)
+    if args.min_logstd is not None:
+        with torch.no_grad():
+            agent.actor_logstd.clamp_(min=args.min_logstd)
+    torch.manual_seed(0)
     env = SubEnvSpec(args.env_id, mode="state", reward_mode="dense").make()
     targets = env.unwrapped.true_color_indices.shape[1]
     for episode in range(args.episodes):
-        obs, _ = env.reset(seed=100 + episode)
+        obs, _ = env.reset(seed=args.first_seed + episode)
         correct = wrong = 0
         pressed = False
         registered_at = confirm_at = None  # TCP heights: where a press registered, what confirms it
         pressable_from = None  # the first step at which the button could be pressed
         nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
         max_shove = 0.0  # the farthest any cube got from its layout point (xy; > 6 cm forbids the press)
+        max_rise = 0.0  # the highest the TCP got above where a press registered (CONFIRM_LIFT confirms it)
         for step in range(env.unwrapped.spec.max_episode_steps or 120):
             with torch.no_grad():
-                action = agent.get_action(flatten_state_obs(obs), deterministic=True)
+                action = agent.get_action(flatten_state_obs(obs), deterministic=not args.sample)
             obs, _, _, truncated, info = env.step(action)
             terms = info.get("reward_dict")
             if terms is not None:  # the previous step's terms (upstream order)
@@ -56,13 +68,16 @@ def main() -> None:
             latch = env.unwrapped.press_latch
             if bool(latch.pending[0]) and registered_at is None:
                 registered_at, confirm_at = float(latch.press_start_z[0]), float(latch.confirm_z[0])
+            if registered_at is not None:
+                max_rise = max(max_rise, float(env.unwrapped.agent.tcp.pose.p[0, 2]) - registered_at)
             if bool(truncated[0]):
                 break
         button = (f"pressable from step {pressable_from}, nearest to the button (xy) {nearest_button:.3f} m"
                   if pressable_from is not None else "never pressable")
         tcp_z = float(env.unwrapped.agent.tcp.pose.p[0, 2])
         press = ("no press registered" if registered_at is None else
-                 f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}")
+                 f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}, "
+                 f"the TCP up to {max_rise:.3f} m above it")
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
               f"a cube moved up to {max_shove:.3f} m, {button}, "
               f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
