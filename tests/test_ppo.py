@@ -375,6 +375,25 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
     assert "no press registered, pressed False" in line
 
 
+def test_bunch_diagnosis_samples_actions_reproducibly(tmp_path, monkeypatch, capsys):
+    from mikasa_robo_rl.agents import AgentStateOnly
+
+    checkpoint = tmp_path / "untrained.pt"
+    torch.save(AgentStateOnly(88, 8).state_dict(), checkpoint)
+    module = _load_script("diagnose_bunch_of_colors", "legacy/rl/baselines")
+    argv = ["diagnose", str(checkpoint), "--episodes", "1", "--sample", "--min-logstd", "-1", "--first-seed", "7"]
+    lines = []
+    for _ in range(2):  # torch seed 0 each run: the same sampled episode
+        monkeypatch.setattr(sys, "argv", argv)
+        module.main()
+        lines.append(capsys.readouterr().out.strip().splitlines()[-1])
+    assert lines[0] == lines[1] and lines[0].startswith("episode 0: correct touches")
+    monkeypatch.setattr(sys, "argv", argv[:4] + ["--min-logstd", "-1"])
+    with pytest.raises(SystemExit):
+        module.main()
+    assert "--min-logstd changes only sampled actions: add --sample" in capsys.readouterr().err
+
+
 def test_shell_game_touch_diagnosis_reports_reach_and_shove_per_episode(tmp_path, monkeypatch, capsys):
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(47, 7).state_dict(), checkpoint)  # ShellGameTouch-VLA-v0: 47 state floats, 7-D ee action
