@@ -159,6 +159,12 @@ class PressLatch:
         (meaningful where ``pending``)."""
         return self.press_start_z + CONFIRM_LIFT
 
+    def rise_share(self, tcp_z: torch.Tensor) -> torch.Tensor:
+        """(B,) the share of CONFIRM_LIFT the TCP has risen above a registered press, in [0, 1];
+        0 where no press is pending."""
+        rise = ((tcp_z - self.press_start_z) / CONFIRM_LIFT).clamp(0.0, 1.0)
+        return torch.where(self.pending, rise, torch.zeros_like(rise))
+
     def update(
         self, depth: torch.Tensor, tcp_z: torch.Tensor, release_gate: torch.Tensor, press_gate: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -26,7 +26,6 @@ from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.buttons import (
     BUTTON_CAP_HALF_LENGTH,
     BUTTON_TOP_Z,
-    CONFIRM_LIFT,
     MAX_PRESS_DEPTH,
     Button,
     PressLatch,
@@ -428,10 +427,8 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     def _lift_progress(self) -> torch.Tensor:
         """(B,) how much of the press is done: 0 before a press registers, then the share of the
         rise that confirms it (clipped to [0, 1]), 1 once confirmed (so confirming loses nothing)."""
-        latch = self.press_latch
-        rise = (self.agent.tcp.pose.p[:, 2] - latch.press_start_z) / CONFIRM_LIFT
-        rising = torch.where(latch.pending, rise.clamp(0.0, 1.0), torch.zeros_like(rise))
-        return torch.where(self.button_pressed, torch.ones_like(rise), rising)
+        rising = self.press_latch.rise_share(self.agent.tcp.pose.p[:, 2])
+        return torch.where(self.button_pressed, torch.ones_like(rising), rising)
 
     def _aims_at_goal(self) -> torch.Tensor:
         """(B,) whether ``obj_to_goal_pos`` aims anywhere: a next target, or the button while
