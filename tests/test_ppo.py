@@ -274,6 +274,7 @@ def test_resume_with_a_larger_batch_goes_on_to_the_total_steps(ppo, tmp_path, mo
     [
         ("--reward-scale", "0.01", "critic outputs scaled by 0.01", 0.01),
         ("--vf-coef", "0.0005", "--vf-coef 0.0005 (saved with 0.5)", 1.0),
+        ("--reward-mode", "sparse", "--reward-mode sparse (saved with normalized_dense): the critic refits", 1.0),
     ],
 )
 def test_resume_in_other_units_adapts_the_critic_and_resets_adam(
@@ -281,14 +282,14 @@ def test_resume_in_other_units_adapts_the_critic_and_resets_adam(
 ):
     # Saved after iteration 1 at --reward-scale 1, --vf-coef 0.5; going on at another value with
     # no step left to train (total = the saved step) writes final_ckpt.pt straight from the
-    # restored agent. Another reward scale scales the critic's outputs; either starts Adam's
-    # moments afresh (their units changed: the critic's directly, the actor's through the clip).
+    # restored agent. Another reward scale scales the critic's outputs; any of the three starts
+    # Adam's moments afresh (their units changed: the critic's directly, the actor's through the clip).
     monkeypatch.chdir(tmp_path)
     flags = ["--env-id", ENV_ID, "--include-state", *TINY]
     ppo.main([*flags, "--time-limit", "0"])
     (resume_file,) = tmp_path.rglob("resume.pt")
     saved = torch.load(resume_file, weights_only=False)
-    assert (saved["reward_scale"], saved["vf_coef"]) == (1.0, 0.5)
+    assert (saved["reward_scale"], saved["vf_coef"], saved["reward_mode"]) == (1.0, 0.5, "normalized_dense")
     ppo.main([*flags, "--resume", str(resume_file), flag, value, "--total-timesteps", "16"])
     out = capsys.readouterr().out
     assert printed in out and "optimizer moments reset" in out
