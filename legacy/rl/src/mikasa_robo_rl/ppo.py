@@ -378,12 +378,11 @@ class Run:
         agent.load_state_dict(state["agent"])
         optimizer.load_state_dict(state["optimizer"])
         # The command's --learning-rate wins over the saved one (Adam's moments are kept unless the
-        # reward scale or --vf-coef changed, _adapt_to_new_units): a run can go on at a lower rate,
+        # reward scale, --vf-coef or --reward-mode changed, _adapt_to_new_units): a run can go on at a lower rate,
         # where a fresh optimizer from --checkpoint would first take full-size steps in every weight.
         for group in optimizer.param_groups:
             group["lr"] = self.args.learning_rate
-        self._adapt_to_new_units(agent, optimizer, state.get("reward_scale"), state.get("vf_coef"),
-                                 state.get("reward_mode"))
+        self._adapt_to_new_units(agent, optimizer, state)
         if self.args.resume_min_logstd is not None:
             with torch.no_grad():
                 agent.actor_logstd.clamp_(min=self.args.resume_min_logstd)
@@ -394,26 +393,24 @@ class Run:
         print(f"resumed {self.save_dir} after iteration {state['iteration']} (step {state['global_step']})")
         return state["iteration"] + 1, state["global_step"]
 
-    def _adapt_to_new_units(
-        self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, saved_scale: float | None,
-        saved_vf_coef: float | None, saved_reward_mode: str | None,
-    ) -> None:
-        """A run resumed at another ``--reward-scale``, ``--vf-coef`` or ``--reward-mode`` than it
-        was saved with (recorded in its resume.pt since 2026-11-27, 2026-11-29 and 2026-11-29's
+    def _adapt_to_new_units(self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, state: dict) -> None:
+        """A run resumed at another ``--reward-scale``, ``--vf-coef`` or ``--reward-mode`` than the
+        resume ``state`` was saved with (recorded since 2026-11-27, 2026-11-29 and 2026-11-29's
         sixth session; an older one counts as unchanged). Another reward scale: scale the critic's
         outputs to the new returns, or the first updates would fit values off by the ratio and
         their advantages would be noise. Another reward mode has no such ratio: the critic refits.
-        Any of them: start the optimizer's moments afresh (a critic whose gradients shrank ~80-fold
-        going from dense to sparse rewards at the same --vf-coef barely moved under the old
-        second moments: explained variance -2.7 after 30 updates, BunchOfColors3-v0 at 28.1 M). They are all in the old units: the
+        Any of them: start the optimizer's moments afresh. They are all in the old units: the
         critic's directly, the actor's through the one gradient-norm clip over both networks,
         whose factor the critic's gradient sets; kept, they made the first steps of a run resumed
-        at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01), and a
+        at 1/100 of its scale ~100x too large (approx_kl 0.3-1.1 an iteration, not ~0.01), a
         critic whose loss weight fell 1,000-fold would barely move for the ~14,000 Adam steps its
-        second moment (β2 0.999) takes to forget the old gradients' squares."""
+        second moment (β2 0.999) takes to forget the old gradients' squares, and one whose
+        gradients shrank ~80-fold going from dense to sparse rewards barely moved either (explained variance
+        -2.7 after 30 updates, BunchOfColors3-v0 at 28.1 M)."""
+        saved_scale, saved_vf_coef, saved_mode = (state.get(k) for k in ("reward_scale", "vf_coef", "reward_mode"))
         new_scale = saved_scale is not None and saved_scale != self.args.reward_scale
         new_vf_coef = saved_vf_coef is not None and saved_vf_coef != self.args.vf_coef
-        new_mode = saved_reward_mode is not None and saved_reward_mode != self.args.reward_mode
+        new_mode = saved_mode is not None and saved_mode != self.args.reward_mode
         if new_scale:
             factor = self.args.reward_scale / saved_scale
             agent.scale_values(factor)
@@ -421,7 +418,7 @@ class Run:
         if new_vf_coef:
             print(f"--vf-coef {self.args.vf_coef} (saved with {saved_vf_coef})")
         if new_mode:
-            print(f"--reward-mode {self.args.reward_mode} (saved with {saved_reward_mode}): the critic refits")
+            print(f"--reward-mode {self.args.reward_mode} (saved with {saved_mode}): the critic refits")
         if new_scale or new_vf_coef or new_mode:
             optimizer.state.clear()
             print("optimizer moments reset")
