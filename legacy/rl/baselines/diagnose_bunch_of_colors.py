@@ -37,8 +37,7 @@ def main() -> None:
         parser.error("--min-logstd changes only sampled actions: add --sample")
     agent = load_agent(args.checkpoint)
     if args.min_logstd is not None:
-        with torch.no_grad():
-            agent.actor_logstd.clamp_(min=args.min_logstd)
+        agent.floor_logstd(args.min_logstd)
     torch.manual_seed(0)
     env = SubEnvSpec(args.env_id, mode="state", reward_mode="dense").make()
     targets = env.unwrapped.true_color_indices.shape[1]

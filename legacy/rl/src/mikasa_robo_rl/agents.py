@@ -83,6 +83,12 @@ class _GaussianHeads(nn.Module):
             head.weight.mul_(factor)
             head.bias.mul_(factor)
 
+    def floor_logstd(self, min_logstd: float) -> None:
+        """Raise the policy's log std to at least ``min_logstd`` in every action dimension
+        (more action noise for a policy whose noise has collapsed)."""
+        with torch.no_grad():
+            self.actor_logstd.clamp_(min=min_logstd)
+
     def head_grad_norms(self) -> dict[str, torch.Tensor]:
         """L2 norms of the current gradients of the critic's parameters and of the policy's own
         (``actor_mean``, ``actor_logstd``; a shared encoder counts in neither), as

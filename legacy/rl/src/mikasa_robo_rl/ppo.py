@@ -384,8 +384,7 @@ class Run:
             group["lr"] = self.args.learning_rate
         self._adapt_to_new_units(agent, optimizer, state)
         if self.args.resume_min_logstd is not None:
-            with torch.no_grad():
-                agent.actor_logstd.clamp_(min=self.args.resume_min_logstd)
+            agent.floor_logstd(self.args.resume_min_logstd)
             print(f"log std raised to at least {self.args.resume_min_logstd}: {[round(v, 3) for v in agent.actor_logstd.flatten().tolist()]}")
         torch.set_rng_state(state["torch_rng"])
         np.random.set_state(state["numpy_rng"])
