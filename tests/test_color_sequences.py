@@ -333,6 +333,21 @@ def test_displacement_before_the_press_ends_the_reaching_and_touch_rewards(make_
     assert 0.0 < float(reward_shoved[0]) < float(reward_clean[0]) / 150
 
 
+@pytest.mark.parametrize(("push", "care"), [(0.01, 1.0), (0.04, 0.5)])
+def test_a_push_short_of_six_cm_shrinks_the_touch_term(make_env, push, care):
+    # Fixed #34: the touch (and lift) terms shrink linearly from a 2 cm push to nothing at 6 cm.
+    env, base = _oracle_until_pressable(make_env)
+    env.step(ZERO)
+    _, reward_clean, *_ = env.step(ZERO)
+    _push_a_non_target_cube(base, dx=push)
+    env.step(ZERO)
+    _, reward_pushed, *_, info = env.step(ZERO)
+    assert bool(info["button_pressable"][0])  # still pressable: the push stays under 6 cm
+    assert float(info["max_cube_displacement_xy"][0]) == pytest.approx(push, abs=0.003)
+    lost = (1.0 - care) * base.CORRECT_TOUCH_REWARD  # the rest moves by < 1.5 (normalized: / 400)
+    assert float(reward_clean[0] - reward_pushed[0]) == pytest.approx(lost / base.DENSE_REWARD_MAX, abs=1.5 / 400)
+
+
 def test_touches_during_the_cue_do_not_count(make_env):
     env = make_env("BunchOfColors3-Long-VLA-v0", reward_mode="normalized_dense")
     base = env.unwrapped

@@ -99,6 +99,9 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     LIFT_REWARD: ClassVar[float] = 90.0
     WRONG_TOUCH_PENALTY: ClassVar[float] = 10.0
     DISPLACEMENT_PENALTY: ClassVar[float] = 20.0
+    # The touch and lift terms shrink linearly from this displacement (the farthest cube from its
+    # layout point, XY) to nothing at STRONG_DISPLACEMENT_XY (DEVIATIONS.md Fixed #32, #34).
+    CARE_FROM_DISPLACEMENT_XY: ClassVar[float] = 0.02
     # Smoothness coefficients (‖a‖, ‖Δa‖, ‖qvel‖) are all 0 in these families.
     ACTION_L2_COEF: ClassVar[float] = 0.0
     ACTION_DELTA_L2_COEF: ClassVar[float] = 0.0
@@ -501,7 +504,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
         """A·(reaching + 0.5·static + touch terms + lift term − displacement penalty); 400 on
         success. No reaching term once no goal is left, no touch or lift term while a cube lies
-        pushed more than 6 cm (DEVIATIONS.md Fixed #30, #32, #33)."""
+        pushed more than 6 cm, less of them from 2 cm (DEVIATIONS.md Fixed #30, #32-#34)."""
         in_action = self.phase_masks(self.elapsed_steps)[2]
         distance = torch.linalg.norm(info["obj_to_goal_pos"], dim=-1)
         # Upstream's goal vector is zero once no goal is left short of the press (a wrong touch,
@@ -522,9 +525,14 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         # the press and success: 90 a step for the touched targets against the ~1 a step that care
         # and the way to the button earn, so a policy that touches them by sweeping through the
         # cubes loses nothing (DEVIATIONS.md Fixed #32). Such a step earns no touch or lift term.
-        progress_reward = torch.where(
-            info["strong_cube_displacement"], torch.zeros_like(correct_reward), correct_reward + lift_reward
+        # A cliff at 6 cm alone says nothing of a push of 2-6 cm, which a touched cube dragged
+        # off by a TCP leaving it low crosses in one or two steps: the terms shrink over it
+        # (Fixed #34), so a smaller push pays more.
+        care = (self.STRONG_DISPLACEMENT_XY - info["max_cube_displacement_xy"]) / (
+            self.STRONG_DISPLACEMENT_XY - self.CARE_FROM_DISPLACEMENT_XY
         )
+        care = care.clamp(0.0, 1.0)  # 0 from 6 cm on, as Fixed #32 has it
+        progress_reward = care * (correct_reward + lift_reward)
         wrong_penalty = self.WRONG_TOUCH_PENALTY * wrong.float()
         action_l2, delta_l2 = self._action_smoothness_terms(action)
         smooth = self.ACTION_L2_COEF * action_l2 + self.ACTION_DELTA_L2_COEF * delta_l2 + self.QVEL_L2_COEF * qvel_l2
