@@ -372,7 +372,8 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
     module.main()
     line = capsys.readouterr().out.strip().splitlines()[-1]
     # An untrained policy stays near its start pose: nothing touched or moved, the button never pressable.
-    assert line.startswith("episode 0: correct touches 0/3, wrong touches 0, a cube moved up to 0.000 m, never pressable")
+    assert line.startswith("episode 0: correct touches 0/3, wrong touches 0, touches at steps [], "
+                           "a cube moved up to 0.000 m, never pressable")
     assert "no press registered, pressed False" in line
 
 

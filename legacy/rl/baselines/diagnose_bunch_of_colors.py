@@ -1,6 +1,7 @@
 """What a BunchOfColors / SeqOfColors / ChainOfColors PPO state policy does per episode:
-how many of the shown cubes it touched, how many others, how far it moved a cube (more than
-``STRONG_DISPLACEMENT_XY``, 6 cm, and the button can no longer be pressed), how near the button it came once
+how many of the shown cubes it touched (and at which steps), how many others, how far it moved a cube
+(more than ``STRONG_DISPLACEMENT_XY``, 6 cm, and the button can no longer be pressed; the step at which one
+first lay 2 cm off, where the reward starts to shrink, and which cube), how near the button it came once
 the button could be pressed (the shown cubes and no other touched), how far from it it ended,
 whether a press registered (the TCP low over the button while pressable), how high the TCP
 ended against the height that confirms that press, and whether it was confirmed (success needs
@@ -50,6 +51,8 @@ def main() -> None:
         nearest_button = float("inf")  # xy, from then on (the TCP starts over the button)
         max_shove = 0.0  # the farthest any cube got from its layout point (xy; > 6 cm forbids the press)
         max_rise = 0.0  # the highest the TCP got above where a press registered (CONFIRM_LIFT confirms it)
+        touch_steps: list[int] = []  # the steps at which a cube's touch registered
+        push = None  # (step, which cube) at which a cube first lay more than CARE_FROM_DISPLACEMENT_XY off
         for step in range(env.unwrapped.spec.max_episode_steps or 120):
             with torch.no_grad():
                 action = agent.get_action(flatten_state_obs(obs), deterministic=not args.sample)
@@ -64,6 +67,15 @@ def main() -> None:
                 nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
             max_shove = max(max_shove, float(info["max_cube_displacement_xy"][0]))
+            base = env.unwrapped
+            touched = base.touched_cubes[0]
+            if int(touched.sum()) > len(touch_steps):
+                touch_steps.append(step)
+            if push is None and max_shove > base.CARE_FROM_DISPLACEMENT_XY:
+                shift = (base.cube_positions()[0, :, :2] - base.layout_poses[0, :, :2]).norm(dim=-1)
+                cube = int(shift.argmax())
+                kind = "a target" if bool(base.sequence_cubes_mask[0, cube]) else "no target"
+                push = (step, f"{kind}, {'touched' if bool(touched[cube]) else 'not touched'}")
             latch = env.unwrapped.press_latch
             if bool(latch.pending[0]) and registered_at is None:
                 registered_at, confirm_at = float(latch.press_start_z[0]), float(latch.confirm_z[0])
@@ -77,8 +89,9 @@ def main() -> None:
         press = ("no press registered" if registered_at is None else
                  f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}, "
                  f"the TCP up to {max_rise:.3f} m above it")
+        pushed = f" (past 2 cm at step {push[0]}: {push[1]})" if push is not None else ""
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
-              f"a cube moved up to {max_shove:.3f} m, {button}, "
+              f"touches at steps {touch_steps}, a cube moved up to {max_shove:.3f} m{pushed}, {button}, "
               f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
               f"pressed {pressed}")
     env.close()
