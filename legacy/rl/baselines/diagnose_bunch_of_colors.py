@@ -41,7 +41,8 @@ def main() -> None:
         agent.floor_logstd(args.min_logstd)
     torch.manual_seed(0)
     env = SubEnvSpec(args.env_id, mode="state", reward_mode="dense").make()
-    targets = env.unwrapped.true_color_indices.shape[1]
+    base = env.unwrapped
+    targets = base.true_color_indices.shape[1]
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=args.first_seed + episode)
         correct = wrong = 0
@@ -53,7 +54,7 @@ def main() -> None:
         max_rise = 0.0  # the highest the TCP got above where a press registered (CONFIRM_LIFT confirms it)
         touch_steps: list[int] = []  # the steps at which a cube's touch registered
         push = None  # (step, which cube) at which a cube first lay more than CARE_FROM_DISPLACEMENT_XY off
-        for step in range(env.unwrapped.spec.max_episode_steps or 120):
+        for step in range(base.spec.max_episode_steps or 120):
             with torch.no_grad():
                 action = agent.get_action(flatten_state_obs(obs), deterministic=not args.sample)
             obs, _, _, truncated, info = env.step(action)
@@ -67,7 +68,6 @@ def main() -> None:
                 nearest_button = min(nearest_button, float(info["xy_dist_to_button"][0]))
             pressed |= bool(info["button_pressed"][0])
             max_shove = max(max_shove, float(info["max_cube_displacement_xy"][0]))
-            base = env.unwrapped
             touched = base.touched_cubes[0]
             if int(touched.sum()) > len(touch_steps):
                 touch_steps.append(step)
@@ -76,20 +76,21 @@ def main() -> None:
                 cube = int(shift.argmax())
                 kind = "a target" if bool(base.sequence_cubes_mask[0, cube]) else "no target"
                 push = (step, f"{kind}, {'touched' if bool(touched[cube]) else 'not touched'}")
-            latch = env.unwrapped.press_latch
+            latch = base.press_latch
             if bool(latch.pending[0]) and registered_at is None:
                 registered_at, confirm_at = float(latch.press_start_z[0]), float(latch.confirm_z[0])
             if registered_at is not None:
-                max_rise = max(max_rise, float(env.unwrapped.agent.tcp.pose.p[0, 2]) - registered_at)
+                max_rise = max(max_rise, float(base.agent.tcp.pose.p[0, 2]) - registered_at)
             if bool(truncated[0]):
                 break
         button = (f"pressable from step {pressable_from}, nearest to the button (xy) {nearest_button:.3f} m"
                   if pressable_from is not None else "never pressable")
-        tcp_z = float(env.unwrapped.agent.tcp.pose.p[0, 2])
+        tcp_z = float(base.agent.tcp.pose.p[0, 2])
         press = ("no press registered" if registered_at is None else
                  f"a press registered at z {registered_at:.3f}, confirmed from z {confirm_at:.3f}, "
                  f"the TCP up to {max_rise:.3f} m above it")
-        pushed = f" (past 2 cm at step {push[0]}: {push[1]})" if push is not None else ""
+        care_cm = round(base.CARE_FROM_DISPLACEMENT_XY * 100)
+        pushed = f" (past {care_cm} cm at step {push[0]}: {push[1]})" if push is not None else ""
         print(f"episode {episode}: correct touches {correct}/{targets}, wrong touches {wrong}, "
               f"touches at steps {touch_steps}, a cube moved up to {max_shove:.3f} m{pushed}, {button}, "
               f"at the end {float(info['xy_dist_to_button'][0]):.3f} m from it (xy) at z {tcp_z:.3f}, {press}, "
