@@ -209,10 +209,10 @@ def test_run_file_lines_parse(ppo, ppo_lstm, trainer, flags):
 # Each shipped checkpoint with its task's horizon (one eval episode per env). RESULTS.md:
 # RememberColor3-v0 1.00 over 96 episodes, ShellGameTouch-v0 0.93 over 256, RotateLenientPos-v0
 # 0.97 over 256, TakeItBack-v0 0.97 over 256, InterceptMedium-v0 0.95 over 256,
-# RememberColor3-VLA-v0 0.95 over 256, ShellGameTouch-VLA-v0 0.91 over 1,024.
+# RememberColor3-VLA-v0 0.95 over 256, ShellGameTouch-VLA-v0 0.91 over 1,024, BunchOfColors3-v0 0.91 over 768.
 SHIPPED_HORIZONS = {"RememberColor3-v0": 60, "ShellGameTouch-v0": 90, "RotateLenientPos-v0": 90,
                     "TakeItBack-v0": 180, "InterceptMedium-v0": 90, "RememberColor3-VLA-v0": 25,
-                    "ShellGameTouch-VLA-v0": 30}
+                    "ShellGameTouch-VLA-v0": 30, "BunchOfColors3-v0": 120}
 
 
 def test_every_shipped_checkpoint_is_tested():
