@@ -426,7 +426,8 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"dataset root (default {DEFAULT_PATH})")
     add("--ckpt-dir", "--ckpt_dir", default=None,
         help="replay the PPO state checkpoints <ckpt-dir>/oracle_checkpoints/ppo_memtasks/state/"
-        "normalized_dense/<env_id>/**/final_success_ckpt.pt instead of the scripted oracle")
+        "normalized_dense/<env_id>/**/final_success_ckpt.pt (or the shipped <ckpt-dir>/<env_id>/final_ckpt.pt: "
+        "legacy/rl/baselines/checkpoints) instead of the scripted oracle")
     add("--num-train-data", "--num_train_data", type=int,
         default=DEFAULT_NUM_TRAIN_DATA,
         help=f"episodes (per checkpoint), a multiple of --batch-size (default {DEFAULT_NUM_TRAIN_DATA})")
