@@ -72,8 +72,7 @@ def main() -> None:
             if int(touched.sum()) > len(touch_steps):
                 touch_steps.append(step)
             if push is None and max_shove > base.CARE_FROM_DISPLACEMENT_XY:
-                shift = (base.cube_positions()[0, :, :2] - base.layout_poses[0, :, :2]).norm(dim=-1)
-                cube = int(shift.argmax())
+                cube = int(base.cube_displacements_xy()[0].argmax())
                 kind = "a target" if bool(base.sequence_cubes_mask[0, cube]) else "no target"
                 push = (step, f"{kind}, {'touched' if bool(touched[cube]) else 'not touched'}")
             latch = base.press_latch

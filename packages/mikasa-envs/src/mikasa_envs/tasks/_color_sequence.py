@@ -343,6 +343,11 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         points[..., 2] += self.TOUCH_POINT_ABOVE_CENTRE
         return points
 
+    def cube_displacements_xy(self, positions: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, N) how far each cube lies from its layout point in xy (6 cm forbids the press)."""
+        positions = self.cube_positions() if positions is None else positions
+        return torch.linalg.norm(positions[..., :2] - self.layout_poses[..., :2], dim=-1)
+
     @property
     def button_goal(self) -> torch.Tensor:
         """(B, 3) the button's goal point: its centre, just above the cap top."""
@@ -380,8 +385,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         positions = self.cube_positions()
         self._cube_positions = positions
 
-        displacement = torch.linalg.norm(positions[..., :2] - self.layout_poses[..., :2], dim=-1)
-        displacement = displacement * action[:, None]
+        displacement = self.cube_displacements_xy(positions) * action[:, None]
         max_displacement = displacement.max(dim=-1).values
         self._mean_displacement = displacement.mean(dim=-1)
         strong_displacement = action & (max_displacement > self.STRONG_DISPLACEMENT_XY)
