@@ -27,6 +27,12 @@ def _place_ball(base, xyz, velocity=(0.0, 0.0, 0.0)) -> None:
     base.ball.set_angular_velocity(torch.zeros(1, 3))
 
 
+def _ball_render_visibility(base) -> float:
+    import sapien
+
+    return base.ball._objs[0].find_component_by_type(sapien.render.RenderBodyComponent).visibility
+
+
 @pytest.mark.parametrize("env_id", INTERCEPT_IDS + GRAB_IDS)
 def test_launch_layout_and_state(make_env, env_id):
     env = make_env(env_id)
@@ -125,7 +131,9 @@ def test_robot_contact_marks_the_ball_touched(make_env):
         env.step(move_towards(tcp, np.array(target), gain=1.5, gripper=-1.0))
         if int(base.elapsed_steps[0]) == 12:
             assert not bool(base.ball_touched[0])  # down beside the ball, not yet touching
+            assert not bool(base.ball_visible[0])  # out of view after its first 10 frames
     assert bool(base.ball_touched[0])
+    assert bool(base.ball_visible[0]) and _ball_render_visibility(base) == 1.0  # back in view
 
 
 def test_intercept_dense_reward_latches_reached_status(make_env):
@@ -198,3 +206,90 @@ def test_zero_actions_never_succeed(make_env, env_id):
     env = make_env(env_id)
     # 4242424242: a slow ball drifting over the target by itself (touch rule, DEVIATIONS.md).
     assert not any(rollout(env, Zero(), seed).success_once for seed in (4242424242, 4242424247))
+
+
+@pytest.mark.parametrize("env_id", ["InterceptMedium-VLA-v0", "InterceptGrabSlow-VLA-v0"])
+def test_ball_in_view_for_ten_frames_then_until_touched(make_env, env_id):
+    """The cameras show the ball in frames 0-9, then not until a robot link touches it; a
+    restored state brings back the view of its frame."""
+    env = make_env(env_id)
+    base = env.unwrapped
+    env.reset(seed=3)
+    shown, saved = [], None
+    for frame in range(14):
+        shown.append(bool(base.ball_visible[0]))
+        assert _ball_render_visibility(base) == float(shown[-1])
+        if frame == 5:
+            saved = env.unwrapped.get_state_dict()
+        env.step(ZERO)
+    assert shown == [True] * 10 + [False] * 4
+    # The physics and the privileged state go on as before: the ball keeps rolling.
+    assert float(base.ball.linear_velocity[0, 1]) > 0.1
+    env.unwrapped.set_state_dict(saved)
+    assert int(base.elapsed_steps[0]) == 5 and _ball_render_visibility(base) == 1.0
+    for _ in range(6):
+        env.step(ZERO)
+    assert _ball_render_visibility(base) == 0.0
+    base.ball_touched[0] = True  # as a push on the ball would latch it
+    env.step(ZERO)
+    assert bool(base.ball_visible[0]) and _ball_render_visibility(base) == 1.0
+    env.reset(seed=3)  # a new episode: in view, untouched
+    assert bool(base.ball_visible[0]) and not bool(base.ball_touched[0])
+
+
+def test_ball_view_option_and_the_rl_release_keep_it_in_view(make_env):
+    import mikasa_robo_rl  # noqa: F401  (registers the RL ids)
+
+    always = make_env("InterceptGrabFast-VLA-v0", ball_shown_steps=None)
+    rl = make_env("InterceptMedium-v0")
+    rl_hidden = make_env("InterceptSlow-v0", ball_shown_steps=3)
+    for env in (always, rl, rl_hidden):
+        env.reset(seed=0)
+        for _ in range(12):
+            env.step(ZERO)
+    assert bool(always.unwrapped.ball_visible[0]) and bool(rl.unwrapped.ball_visible[0])
+    assert not bool(rl_hidden.unwrapped.ball_visible[0])
+    for bad in (0, -2, 2.5, True, "10"):
+        with pytest.raises(ValueError, match="ball_shown_steps=.*accepted values: an int >= 1"):
+            make_env("InterceptSlow-VLA-v0", ball_shown_steps=bad)
+
+
+def test_camera_frames_lose_the_ball_after_ten_frames(make_env):
+    """rgb: the red ball's pixels in the base camera are there in frame 9, gone in frame 10."""
+    env = make_env("InterceptGrabSlow-VLA-v0", obs_mode="rgb")
+    obs, _ = env.reset(seed=0)
+
+    def red_pixels(obs) -> int:
+        rgb = obs["sensor_data"]["base_camera"]["rgb"][0].int()
+        return int(((rgb[..., 0] > 150) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60)).sum())
+
+    counts = [red_pixels(obs)]
+    for _ in range(10):
+        obs, *_ = env.step(ZERO)
+        counts.append(red_pixels(obs))
+    assert min(counts[:10]) > 0 and counts[10] == 0
+
+
+def test_grab_oracle_reads_no_ball_position_out_of_view(make_env):
+    """The oracle succeeds when the ball's position is NaN whenever the cameras do not show
+    it: it predicts the path from the frames it saw. (InterceptGrab's own success test does
+    not read ``ball_position``.)"""
+    env = make_env("InterceptGrabMedium-VLA-v0")
+    base = env.unwrapped
+    seen = base.ball_position
+    base.ball_position = lambda: seen() if bool(base.ball_visible[0]) else torch.full((1, 3), float("nan"))
+    assert rollout(env, make_oracle(env), 4242424242, stop_on_success=True).success_once
+
+
+def test_memoryless_oracle_meets_the_ball_only_while_it_stays_in_view(make_env):
+    """The leak this closes (DEVIATIONS.md, Fixed #35): with the ball in view every frame,
+    the memoryless oracle (a guessed velocity, the ball it sees now) catches slow balls; out
+    of view, its guessed path catches none of the same seeds."""
+    seeds = [4242424242 + i for i in range(8)]
+    in_view = make_env("InterceptGrabSlow-VLA-v0", ball_shown_steps=None)
+    out_of_view = make_env("InterceptGrabSlow-VLA-v0")
+    caught = {}
+    for name, env in (("in view", in_view), ("out of view", out_of_view)):
+        policy = make_oracle(env, memoryless=True)
+        caught[name] = sum(rollout(env, policy, seed, stop_on_success=True).success_once for seed in seeds)
+    assert caught["in view"] >= 3 and caught["out of view"] == 0

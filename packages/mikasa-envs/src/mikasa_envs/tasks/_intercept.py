@@ -2,13 +2,21 @@
 
 At every episode start a ball of radius 2 cm is placed at x ~ U[−0.35, −0.05),
 y ~ U[−0.90, −0.65) and given a launch velocity (vx ~ U[0, 0.05), vy ~ U[v_min, v_max),
-0). It slides, then rolls at ≈ 5/7 of the launch speed. Nothing is hidden and there are no
-phases: the memory demand is that one frame shows no velocity (``intercept.md``).
+0). It slides, then rolls at ≈ 5/7 of the launch speed. There are no phases; the memory
+demand is that one frame shows no velocity (``intercept.md``).
+
+The ball is in view for its first ``BALL_SHOWN_STEPS`` frames, long enough to measure its
+motion, then out of view until the robot first touches it (DEVIATIONS.md, Fixed #35): with
+the ball in view every frame, a policy without memory that assumed a velocity from the
+narrow launch range and aimed at the ball it saw met slow balls in up to half the episodes.
+Only the render is affected (physics, draws, the reset frame and the privileged state are
+unchanged). The RL release's ids keep the ball in view (``BALL_SHOWN_STEPS = None``), as
+published; ``gym.make(id, ball_shown_steps=...)`` sets it for any id.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import sapien
@@ -29,6 +37,8 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
     """A ball rolling across the table at a random launch velocity; subclasses add the goal.
 
     ``oracle_info`` is the launch velocity (vx, vy, 0), float (B, 3), constant per episode.
+    ``ball_touched`` latches the first push of a robot link on the ball; ``ball_visible`` says
+    whether the cameras show the ball in the current frame.
     """
 
     BALL_RADIUS: ClassVar[float] = 0.02
@@ -43,11 +53,30 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
     # No cue / delay phases: the ball moves from the first step.
     CUE_PHASE_STEPS = (0, 0)
     EMPTY_PHASE_STEPS = (0, 0)
+    # Frames (elapsed_steps 0 .. N-1) in which the cameras show the ball before it leaves
+    # view until the robot's first touch; None: in view every frame (the reference). Ten
+    # frames: it slides for ~3 and rolls for 7, which a policy can measure its motion from.
+    BALL_SHOWN_STEPS: ClassVar[int | None] = 10
 
     ball: Actor
 
     GPU_MEMORY: ClassVar[dict[str, int]] = SMALL_SCENE_GPU_MEMORY
-    TASK_STATE = ("ball_start_pos", "launch_velocity")
+    TASK_STATE = ("ball_start_pos", "launch_velocity", "ball_touched")
+
+    def __init__(self, *args: Any, ball_shown_steps: int | None | str = "default", **kwargs: Any) -> None:
+        """``ball_shown_steps``: frames the ball is in view before it hides until the robot
+        touches it (an int >= 1), None to keep it in view, "default" for the id's own
+        ``BALL_SHOWN_STEPS``."""
+        if ball_shown_steps != "default":
+            if ball_shown_steps is not None and (
+                isinstance(ball_shown_steps, bool) or not isinstance(ball_shown_steps, int) or ball_shown_steps < 1
+            ):
+                raise ValueError(
+                    f"ball_shown_steps={ball_shown_steps!r} is not accepted; accepted values: an int >= 1 "
+                    "(frames in view before the ball hides until the robot touches it), None (always in view)"
+                )
+            self.BALL_SHOWN_STEPS = ball_shown_steps
+        super().__init__(*args, **kwargs)
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)
@@ -61,6 +90,10 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         )
         self.launch_velocity = torch.zeros(self.num_envs, 3, device=self.device)
         self.ball_start_pos = torch.zeros(self.num_envs, 3, device=self.device)
+        # Whether any robot link has pushed on the ball this episode (latched per env).
+        self.ball_touched = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        self._robot_entities = {body.entity for link in self.agent.robot.links for body in link._bodies}
+        self._ball_renders = [obj.find_component_by_type(sapien.render.RenderBodyComponent) for obj in self.ball._objs]
 
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
         # Torch draws, in order: the ball's start x, y; the launch vx, vy; then the subclass's.
@@ -87,6 +120,44 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         self.ball.set_pose(Pose.create_from_pq(p=start, q=quat))
         self.ball.set_linear_velocity(self.launch_velocity[env_idx])
         self.ball.set_angular_velocity(torch.zeros(len(env_idx), 3, device=self.device))
+        self.ball_touched[env_idx] = False
+        self._show_ball(self._elapsed_steps)
+
+    # ------------------------------------------------------- touch and view
+    def _after_simulation_step(self) -> None:
+        super()._after_simulation_step()
+        # CPU: every substep (a glancing hit may last less than a control step).
+        if not self.gpu_sim_enabled and not bool(self.ball_touched[0]):
+            self.ball_touched[0] = self._ball_touches_cpu(self._robot_entities, pushing=True)
+
+    def _after_control_step(self) -> None:
+        super()._after_control_step()
+        if self.gpu_sim_enabled:
+            for link in self.agent.robot.links:
+                force = self.scene.get_pairwise_contact_forces(link, self.ball)
+                self.ball_touched |= torch.linalg.norm(force, dim=-1) > 0
+        # ManiSkill counts this step after the hook: the frame about to be observed is the next one.
+        self._show_ball(self._elapsed_steps + 1)
+
+    def _on_state_restored(self, env_idx: torch.Tensor) -> None:
+        super()._on_state_restored(env_idx)
+        self._show_ball(self._elapsed_steps)
+
+    def ball_visible_in(self, frame: torch.Tensor) -> torch.Tensor:
+        """(B,) whether the cameras show the ball in the frame observed at elapsed step ``frame``."""
+        if self.BALL_SHOWN_STEPS is None:
+            return torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
+        return (frame < self.BALL_SHOWN_STEPS) | self.ball_touched
+
+    @property
+    def ball_visible(self) -> torch.Tensor:
+        """(B,) whether the current frame shows the ball."""
+        return self.ball_visible_in(self._elapsed_steps)
+
+    def _show_ball(self, frame: torch.Tensor) -> None:
+        """Show or hide the ball's render body per env (physics untouched)."""
+        for render_body, visible in zip(self._ball_renders, self.ball_visible_in(frame).tolist(), strict=True):
+            render_body.visibility = 1.0 if visible else 0.0
 
     # --------------------------------------------------------------- queries
     def ball_position(self) -> torch.Tensor:

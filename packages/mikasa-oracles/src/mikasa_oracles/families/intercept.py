@@ -1,8 +1,10 @@
 """Oracles for Intercept (deflect a rolling ball over a target) and InterceptGrab (catch it).
 
-Both see the ball the way a camera does: its position in each frame. They estimate its
-velocity from the positions of the frames seen so far (one frame shows no motion) and
-predict its straight rolling path; the launch velocity (``oracle_info``) is never read.
+Both see the ball the way a camera does: its position in each frame that shows it
+(``ball_visible``: the VLA ids show it for its first 10 frames, then only once the robot has
+touched it). They estimate its velocity from the positions of the frames seen so far (one
+frame shows no motion) and predict its straight rolling path, and where it is while out of
+view; the launch velocity (``oracle_info``) is never read.
 
 Moving targets are tracked with feedforward: ``pd_ee_delta_pose`` moves the TCP only part
 of the way to the commanded pose in one step, so a hand following a point that moves by
@@ -32,15 +34,23 @@ ROBOT_BASE_XY = (-0.615, 0.0)
 REACH_RADIUS = 0.78
 # The ball slides for its first ~3 steps before it rolls: fit the velocity to later frames.
 FIRST_ROLLING_FRAME = 3
+# A rolling ball keeps this share of its speed from one step to the next (measured: 1.4 %
+# a second); predictions 40 steps ahead are then within 0.5 mm.
+ROLLING_DECAY = 0.99929
 
 
 class BallObserver:
-    """Remembers the ball's position in every frame seen and fits its rolling motion."""
+    """Remembers the ball's position in every frame seen and fits its rolling motion.
+
+    ``now`` is the ball's position in the current frame: seen (``see``) or, while the ball
+    is out of view, predicted from the fit (``predict``).
+    """
 
     def __init__(self) -> None:
         self.frames: list[int] = []
         self.positions: list[np.ndarray] = []
         self.fit_from = FIRST_ROLLING_FRAME
+        self.now = np.zeros(2)
 
     def refit_from(self, frame: int) -> None:
         """Fit the motion only to frames from ``frame`` on (the ball was hit before)."""
@@ -50,6 +60,21 @@ class BallObserver:
         """Record the ball centre (xy) seen in ``frame``."""
         self.frames.append(frame)
         self.positions.append(np.asarray(position[:2], dtype=np.float64))
+        self.now = self.positions[-1]
+
+    def predict(self, frame: int) -> None:
+        """The ball is out of view in ``frame``: move ``now`` on along the fitted path from
+        the last frame seen, slowing as a rolling ball does."""
+        velocity = self.velocity()
+        if velocity is None:
+            self.now = self.positions[-1]
+            return
+        rolling = [f for f in self.frames if f >= self.fit_from] or self.frames[-2:]
+        # The fit is the velocity at the middle of the frames it used; the speed at the last
+        # one is a little lower, and every later step keeps ROLLING_DECAY of it.
+        last_velocity = velocity * ROLLING_DECAY ** (self.frames[-1] - float(np.mean(rolling)))
+        steps = frame - self.frames[-1]
+        self.now = self.positions[-1] + last_velocity * ROLLING_DECAY * (1 - ROLLING_DECAY**steps) / (1 - ROLLING_DECAY)
 
     def velocity(self) -> np.ndarray | None:
         """xy displacement per step, fitted by least squares (None before two frames)."""
@@ -144,11 +169,14 @@ class BallChaser(ScriptedOracle):
         base = self.base
         frame = int(base.elapsed_steps[0])
         tcp = base.agent.tcp.pose.raw_pose[0].cpu().numpy().astype(np.float64)
-        self.ball.see(frame, base.ball_position()[0].cpu().numpy())
+        if bool(base.ball_visible[0]):
+            self.ball.see(frame, base.ball_position()[0].cpu().numpy())
+        else:
+            self.ball.predict(frame)
         velocity = self.ball.velocity()
         if velocity is None or np.linalg.norm(velocity) < 1e-4:
             # Nothing to plan yet: rise towards the ball's side of the table.
-            latest = self.ball.positions[-1]
+            latest = self.ball.now
             staging = np.array([latest[0], max(latest[1] + 0.35, self.WAIT_Y[0]), 0.12])
             return track(tcp, staging, np.zeros(3), self.EARLY_GRIPPER)
         return self._act(tcp, frame, velocity)
@@ -161,7 +189,7 @@ class BallChaser(ScriptedOracle):
         whether the hand has merged with the ball."""
         speed = float(np.linalg.norm(velocity))
         heading = velocity / speed
-        origin = self.ball.positions[-1]  # the path: origin + heading·s, the ball at s = 0 now
+        origin = self.ball.now  # the path: origin + heading·s, the ball at s = 0 now
         if self.wait_point is None or frame <= self.replan_until:
             self.wait_point = self._choose_wait(tcp, origin, heading, speed)
         wait_along = float(np.dot(self.wait_point - origin, heading))
@@ -230,7 +258,7 @@ class InterceptGrabOracle(BallChaser):
         target_xy, feedforward, merged = self._comoving(tcp, frame, velocity)
         if self.stage == "approach" and merged:
             self.stage = "descend"
-        aligned = np.linalg.norm(self.ball.positions[-1] - tcp[:2]) < self.ALIGN_TOL
+        aligned = np.linalg.norm(self.ball.now - tcp[:2]) < self.ALIGN_TOL
         z, gripper = self.HOVER_Z, GRIPPER_OPEN
         if self.stage == "descend":
             z = self.LOW_Z if aligned else min(tcp[2], self.HOVER_Z)
@@ -422,7 +450,7 @@ class InterceptOracle(BallChaser):
             wait = super()._choose_wait(tcp, origin, heading, speed)
             # The hit comes after the merge and the descent (~DESCENT_STEPS steps).
             strike = wait + heading * speed * (self.MERGE_STEPS + self.DESCENT_STEPS)
-            strike_frame = self.ball.frames[-1] + int(np.dot(strike - origin, heading) / speed)
+            strike_frame = int(self.base.elapsed_steps[0]) + int(np.dot(strike - origin, heading) / speed)
             self.bat_velocity, self.wanted_velocity = self._aim(strike, heading * speed, strike_frame)
             change = self.bat_velocity - heading * speed
             normal = change / max(np.linalg.norm(change), 1e-9)
@@ -455,7 +483,7 @@ class InterceptOracle(BallChaser):
         if self.stage == "lift":
             return self._lift(tcp, frame, velocity)
         if self.stage == "watch":
-            if not self._misses(self.ball.positions[-1], velocity, frame):
+            if not self._misses(self.ball.now, velocity, frame):
                 return track(tcp, np.array([*tcp[:2], self.HOVER_Z + 0.03]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))
             self.stage, self.wait_point, self.replan_until = "approach", None, frame
         target_xy, feedforward, merged = self._comoving(tcp, frame, velocity)
@@ -466,16 +494,16 @@ class InterceptOracle(BallChaser):
             # A hand at its top speed trails a fast ball; slow balls it follows exactly.
             excess = max(float(np.linalg.norm(velocity)) - self.SLOW_BALL, 0.0)
             tol = self.ALIGN_TOL + self.align_tol_per_speed * excess
-            beside = np.linalg.norm(self.ball.positions[-1] + self.hand_offset - tcp[:2]) < tol
+            beside = np.linalg.norm(self.ball.now + self.hand_offset - tcp[:2]) < tol
             z = self.LOW_Z if beside else min(tcp[2], self.HOVER_Z)
             if beside and tcp[2] < self.LOW_Z + 0.008:
                 # Aim again from where the ball really is now, coming from the side chosen.
                 window = self.approach_angle + self.REAIM_WINDOW
-                self.bat_velocity, self.wanted_velocity = self._aim(self.ball.positions[-1], velocity, frame, window)
+                self.bat_velocity, self.wanted_velocity = self._aim(self.ball.now, velocity, frame, window)
                 # A small change can still be needed: a slow ball far from the target
                 # passes wide of it by more than the aim tolerance. Hit it then too.
                 small = np.linalg.norm(self.wanted_velocity - velocity) < self.MIN_CHANGE
-                if small and not self._misses(self.ball.positions[-1], velocity, frame):
+                if small and not self._misses(self.ball.now, velocity, frame):
                     self.stage = "watch"
                 else:
                     self.stage, self.strike_frame = "strike", frame
@@ -504,21 +532,29 @@ class InterceptOracle(BallChaser):
         """Slow down and rise clear of the ball, then watch its new path."""
         if frame - self.lift_frame >= self.lift_steps:
             self.stage = "watch"
-            self.ball.refit_from(self.lift_frame + 2)
+            if bool(self.base.ball_touched[0]):
+                # Hit: fit the new path. (Missed, the ball rolls on as fitted, out of view.)
+                self.ball.refit_from(self.lift_frame + 2)
         return track(tcp, np.array([*tcp[:2], self.HOVER_Z]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))
 
 
 class GuessedMotionObserver(BallObserver):
     """A `BallObserver` that keeps no frames but the current one and answers a fixed
-    guessed velocity (one frame shows no motion)."""
+    guessed velocity (one frame shows no motion); with the ball out of view, a guessed path
+    (start and velocity) says where it is."""
 
-    def __init__(self, guessed_velocity: np.ndarray) -> None:
+    def __init__(self, guessed_start: np.ndarray, guessed_velocity: np.ndarray) -> None:
         super().__init__()
+        self.guessed_start = guessed_start
         self.guessed_velocity = guessed_velocity
 
     def velocity(self) -> np.ndarray:
         """The guess (xy displacement per step)."""
         return self.guessed_velocity
+
+    def predict(self, frame: int) -> None:
+        """Out of view: the guessed start moved on by the guessed velocity."""
+        self.now = self.guessed_start + self.guessed_velocity * frame
 
 
 class MemorylessBallChaserMixin(Memoryless):
@@ -527,9 +563,10 @@ class MemorylessBallChaserMixin(Memoryless):
 
     It uses a velocity drawn from the task's launch range (vx ~ U[0, ``VX_MAX``), vy ~
     U[``VELOCITY_RANGE``), per control step), the same at every step, with the ball's
-    position in the current frame. Chance is 0 (a continuous velocity, never seen); a
-    success means the ball can be met by reacting to where it is now, i.e. without memory.
-    Kept: the plan and stage of the approach (wait point, merge, strike, lift: motion).
+    position in the current frame; while the ball is out of view, a start drawn from the
+    task's start range moved on by that velocity stands for it, and the wait point planned
+    from the ball once seen is wiped too. Kept: the stage of the approach (merge, strike,
+    lift: motion).
     """
 
     def forget(self) -> None:
@@ -537,7 +574,10 @@ class MemorylessBallChaserMixin(Memoryless):
         base = self.base
         rng = self.guess_rng(2)
         launch = np.array([rng.uniform(0.0, base.VX_MAX), rng.uniform(*base.VELOCITY_RANGE)])
-        self.ball = GuessedMotionObserver(launch * float(base.control_timestep))
+        start = np.array([rng.uniform(*base.BALL_START_X), rng.uniform(*base.BALL_START_Y)])
+        self.ball = GuessedMotionObserver(start, launch * float(base.control_timestep))
+        if not bool(base.ball_visible[0]):
+            self.wait_point = None
 
 
 class MemorylessInterceptOracle(MemorylessBallChaserMixin, InterceptOracle):
