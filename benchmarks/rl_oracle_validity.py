@@ -19,6 +19,7 @@ because some oracles plan with the time left).
     python benchmarks/rl_oracle_validity.py                        # 50 seeds, every RL id
     python benchmarks/rl_oracle_validity.py --seeds 10 --env-ids RememberColor3-v0,TakeItBack-v0
     python benchmarks/rl_oracle_validity.py --workers 16 --out results/rl_validity
+    python benchmarks/rl_oracle_validity.py --env-ids InterceptSlow-v0 --env-kwargs '{"ball_shown_steps": 10}'
 
 Writes ``<out>/rl_oracle_validity.json`` and ``.md`` (a table) and prints the table.
 """
@@ -40,11 +41,11 @@ POLICIES = ("oracle", "oracle-memoryless", "random", "zero")
 
 
 def run_job(
-    env_id: str, policy: str, seeds: list[int], horizon_factor: float
+    env_id: str, policy: str, seeds: list[int], horizon_factor: float, env_kwargs: dict
 ) -> tuple[str, str, dict[int, tuple[int, bool]]]:
     """Roll ``policy`` (one of ``POLICIES``) out on ``seeds``: {seed: (step of first success,
     within the horizon)} for the seeds that succeeded (oracle failures rerun with
-    ``horizon_factor`` x the horizon as the step limit)."""
+    ``horizon_factor`` x the horizon as the step limit). ``env_kwargs`` go to ``gym.make``."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import gymnasium as gym
     import torch
@@ -57,7 +58,7 @@ def run_job(
 
     def make(limit: int | None = None) -> tuple[gym.Env, object]:
         env = gym.make(env_id, obs_mode="state", control_mode="pd_joint_delta_pos",
-                       reward_mode="normalized_dense", max_episode_steps=limit)
+                       reward_mode="normalized_dense", max_episode_steps=limit, **env_kwargs)
         agents = {
             "oracle": lambda: make_rl_oracle(env),
             "oracle-memoryless": lambda: make_rl_oracle(env, memoryless=True),
@@ -96,9 +97,17 @@ def main() -> None:
     parser.add_argument("--out", default="results/rl_oracle_validity", help="output directory")
     parser.add_argument("--horizon-factor", type=float, default=3.0,
                         help="the oracle's step limit as a multiple of the horizon (>= 1)")
+    parser.add_argument("--env-kwargs", default="{}",
+                        help='a JSON object of gym.make keyword arguments, e.g. \'{"ball_shown_steps": 10}\'')
     args = parser.parse_args()
     if args.horizon_factor < 1:
         parser.error(f"--horizon-factor must be >= 1, got {args.horizon_factor}")
+    try:
+        env_kwargs = json.loads(args.env_kwargs)
+    except json.JSONDecodeError as err:
+        parser.error(f"--env-kwargs is not JSON ({err}); give an object such as '{{\"ball_shown_steps\": 10}}'")
+    if not isinstance(env_kwargs, dict):
+        parser.error(f"--env-kwargs must be a JSON object of keyword arguments, got {args.env_kwargs!r}")
     env_ids = args.env_ids.split(",") if args.env_ids else list(mikasa_robo_rl.rl_env_ids())
     for env_id in env_ids:
         mikasa_robo_rl.get_rl_task(env_id)  # unknown ids fail here, before any work
@@ -109,7 +118,7 @@ def main() -> None:
     wins: dict[tuple[str, str], dict[int, tuple[int, bool]]] = {(e, p): {} for e in env_ids for p in POLICIES}
     start = time.perf_counter()
     with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(run_job, *job, args.horizon_factor) for job in jobs]
+        futures = [pool.submit(run_job, *job, args.horizon_factor, env_kwargs) for job in jobs]
         for done, future in enumerate(as_completed(futures), 1):
             env_id, policy, won = future.result()
             wins[(env_id, policy)].update(won)
@@ -152,12 +161,15 @@ def main() -> None:
               f"| {r['oracle_success_extended']:.2f} "
               f"| {r['steps_to_success_p50']:.0f} / {r['steps_to_success_p95']:.0f} |" for r in rows]
     summary = f"{sum(r['valid'] for r in rows)}/{len(rows)} ids valid over {len(seeds)} seeds; {wall:.0f} s with {args.workers} workers"
+    if env_kwargs:
+        summary += f"; gym.make keyword arguments {json.dumps(env_kwargs)}"
     print("\n".join(lines) + "\n\n" + summary)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for name, text in (
         ("rl_oracle_validity.json", json.dumps(dict(seeds=len(seeds), first_seed=FIRST_SEED, wall_s=wall,
                                                     workers=args.workers, horizon_factor=args.horizon_factor,
+                                                    env_kwargs=env_kwargs,
                                                     rows=rows), indent=2)),
         ("rl_oracle_validity.md", "\n".join(lines) + f"\n\n{summary}\n"),
     ):

@@ -8,7 +8,8 @@ than chance shows its answer without memory (a leak).
   agent sees when it must act (1/N objects, mugs, buttons or counts; 1/C(9, L) colour sets,
   1/P(9, L) colour sequences). For TakeItBack the candidates are the three start rows.
 * Tasks without a discrete answer, each justified in its reason: Intercept* (a continuous
-  velocity that one frame does not show: chance 0, any success is a leak), TraceShape* and
+  start and velocity, out of view when the ball must be met: chance 0, any success is a
+  leak), TraceShape* and
   TraceShapeSeq* (contours guessed from the task's prior — centre, size, rotation, the shape
   unless shown — traced from checkpoint 0 without straying from the true ones close them at
   a rate computed by ``trace_shape_guess_rate``), Rotate* (a continuous start heading: the success window's share of it),
@@ -282,8 +283,9 @@ def task_chance(env_id: str) -> Chance:
     if family in ("intercept", "intercept_grab"):
         return Chance(
             0.0,
-            "0: no discrete answer; the launch velocity is continuous and one frame shows no "
-            "motion, so any success without memory means the ball can be met reactively",
+            "0: no discrete answer; the ball's start and launch velocity are continuous, and after "
+            "its first 10 frames it is out of view until touched, so meeting it without memory "
+            "takes a lucky guess of a continuous path",
         )
     if family == "trace_shape":
         variant = _variant(env_id, "TraceShape")
