@@ -10,7 +10,9 @@ motion, then out of view until the robot first touches it (DEVIATIONS.md, Fixed 
 the ball in view every frame, a policy without memory that assumed a velocity from the
 narrow launch range and aimed at the ball it saw met slow balls in up to half the episodes.
 Only the render is affected (physics, draws, the reset frame and the privileged state are
-unchanged). The RL release's ids keep the ball in view (``BALL_SHOWN_STEPS = None``), as
+unchanged): the physical ball has no visual; a visual-only kinematic twin, ``ball_visual``,
+stands at its pose while it is in view and far below the scene while it is not (ManiSkill's
+way to show and hide a marker: SAPIEN's batched renderer forbids changing visibility). The RL release's ids keep the ball in view (``BALL_SHOWN_STEPS = None``), as
 published; ``gym.make(id, ball_shown_steps=...)`` sets it for any id.
 """
 
@@ -27,6 +29,9 @@ from mani_skill.utils.structs import Actor, Pose
 from mikasa_envs.base_env import MikasaVLABaseEnv
 
 BALL_RGBA = (1.0, 0.0, 0.0, 1.0)
+# Where the ball's visual twin waits while the ball is out of view: beyond every camera's far
+# plane and below the floor.
+HIDDEN_VISUAL_POSITION = (0.0, 0.0, -1000.0)
 
 
 SMALL_SCENE_GPU_MEMORY = {"found_lost_pairs_capacity": 2**25, "max_rigid_patch_count": 2**18}
@@ -80,12 +85,19 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
 
     def _load_scene(self, options: dict) -> None:
         super()._load_scene(options)
-        self.ball = actors.build_sphere(
+        # The physical ball (collision only) and its visual twin (no collision), which the
+        # cameras see where the ball is while it is in view.
+        builder = self.scene.create_actor_builder()
+        builder.add_sphere_collision(radius=self.BALL_RADIUS)
+        builder.set_initial_pose(sapien.Pose(p=[0, 0, self.BALL_RADIUS]))
+        self.ball = builder.build(name="ball")
+        self.ball_visual = actors.build_sphere(
             self.scene,
             radius=self.BALL_RADIUS,
             color=list(BALL_RGBA),
-            name="ball",
-            body_type="dynamic",
+            name="ball_visual",
+            body_type="kinematic",
+            add_collision=False,
             initial_pose=sapien.Pose(p=[0, 0, self.BALL_RADIUS]),
         )
         self.launch_velocity = torch.zeros(self.num_envs, 3, device=self.device)
@@ -93,7 +105,6 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         # Whether any robot link has pushed on the ball this episode (latched per env).
         self.ball_touched = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         self._robot_entities = {body.entity for link in self.agent.robot.links for body in link._bodies}
-        self._ball_renders = [obj.find_component_by_type(sapien.render.RenderBodyComponent) for obj in self.ball._objs]
 
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
         # Torch draws, in order: the ball's start x, y; the launch vx, vy; then the subclass's.
@@ -121,7 +132,7 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         self.ball.set_linear_velocity(self.launch_velocity[env_idx])
         self.ball.set_angular_velocity(torch.zeros(len(env_idx), 3, device=self.device))
         self.ball_touched[env_idx] = False
-        self._show_ball(self._elapsed_steps)
+        self._place_ball_visual(self._elapsed_steps)
 
     # ------------------------------------------------------- touch and view
     def _after_simulation_step(self) -> None:
@@ -133,15 +144,19 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
     def _after_control_step(self) -> None:
         super()._after_control_step()
         if self.gpu_sim_enabled:
+            # As ManiSkill's tasks move a marker after a step: fetch the new poses first.
+            self.scene._gpu_fetch_all()
             for link in self.agent.robot.links:
                 force = self.scene.get_pairwise_contact_forces(link, self.ball)
                 self.ball_touched |= torch.linalg.norm(force, dim=-1) > 0
         # ManiSkill counts this step after the hook: the frame about to be observed is the next one.
-        self._show_ball(self._elapsed_steps + 1)
+        self._place_ball_visual(self._elapsed_steps + 1)
+        if self.gpu_sim_enabled:
+            self.scene._gpu_apply_all()
 
     def _on_state_restored(self, env_idx: torch.Tensor) -> None:
         super()._on_state_restored(env_idx)
-        self._show_ball(self._elapsed_steps)
+        self._place_ball_visual(self._elapsed_steps)
 
     def ball_visible_in(self, frame: torch.Tensor) -> torch.Tensor:
         """(B,) whether the cameras show the ball in the frame observed at elapsed step ``frame``."""
@@ -154,10 +169,13 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         """(B,) whether the current frame shows the ball."""
         return self.ball_visible_in(self._elapsed_steps)
 
-    def _show_ball(self, frame: torch.Tensor) -> None:
-        """Show or hide the ball's render body per env (physics untouched)."""
-        for render_body, visible in zip(self._ball_renders, self.ball_visible_in(frame).tolist(), strict=True):
-            render_body.visibility = 1.0 if visible else 0.0
+    def _place_ball_visual(self, frame: torch.Tensor) -> None:
+        """Per env, put the ball's visual twin on the ball if the frame ``frame`` shows it,
+        else out of every camera's view (physics untouched)."""
+        pose = self.ball.pose.raw_pose.clone()
+        hidden = ~self.ball_visible_in(frame)
+        pose[hidden, :3] = torch.tensor(HIDDEN_VISUAL_POSITION, device=pose.device)
+        self.ball_visual.set_pose(Pose.create(pose))
 
     # --------------------------------------------------------------- queries
     def ball_position(self) -> torch.Tensor:

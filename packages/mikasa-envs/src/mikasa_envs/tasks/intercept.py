@@ -16,7 +16,7 @@ class InterceptVLABaseEnv(InterceptBallVLABaseEnv):
     +y. Get into its path and deflect it so that its centre passes over the red/white
     target. The cameras show the ball for its first 10 frames, then not until the robot
     touches it: its speed and heading must be measured from those frames and its path
-    remembered (``BALL_SHOWN_STEPS``; DEVIATIONS.md, Fixed #35).
+    remembered (DEVIATIONS.md, Fixed #35).
 
     **Randomizations:** the ball's start (x ∈ [−0.35, −0.05), y ∈ [−0.90, −0.65), 2 cm above
     the table); its launch velocity (vx ∈ [0, 0.05), vy in the variant's range); the

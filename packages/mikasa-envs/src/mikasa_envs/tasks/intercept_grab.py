@@ -14,8 +14,8 @@ class InterceptGrabVLABaseEnv(InterceptBallVLABaseEnv):
     """**Task Description:** a red ball is launched rolling along +y across the table.
     Intercept it, close the gripper on it and come to rest while holding it. The cameras
     show the ball for its first 10 frames, then not until the robot touches it: its speed
-    and heading must be measured from those frames and its path remembered
-    (``BALL_SHOWN_STEPS``; DEVIATIONS.md, Fixed #35).
+    and heading must be measured from those frames and its path remembered (DEVIATIONS.md,
+    Fixed #35).
 
     **Randomizations:** the ball's start on the table (x ∈ [−0.35, −0.05),
     y ∈ [−0.90, −0.65)); its launch velocity (vx ∈ [0, 0.05), vy in the variant's range);
