@@ -12,8 +12,9 @@ narrow launch range and aimed at the ball it saw met slow balls in up to half th
 Only the render is affected (physics, draws, the reset frame and the privileged state are
 unchanged): the physical ball has no visual; a visual-only kinematic twin, ``ball_visual``,
 stands at its pose while it is in view and far below the scene while it is not (ManiSkill's
-way to show and hide a marker: SAPIEN's batched renderer forbids changing visibility). The RL release's ids keep the ball in view (``BALL_SHOWN_STEPS = None``), as
-published; ``gym.make(id, ball_shown_steps=...)`` sets it for any id.
+way to show and hide a marker: SAPIEN's batched renderer forbids changing visibility). The
+RL release's ids keep the ball in view (``BALL_SHOWN_STEPS = None``), as published;
+``gym.make(id, ball_shown_steps=...)`` sets it for any id.
 """
 
 from __future__ import annotations
