@@ -39,6 +39,7 @@ class InterceptVLABaseEnv(InterceptBallVLABaseEnv):
     # the goal; closer than REACHED_DIST latches ``reached_status``.
     HIT_OFFSET: ClassVar[float] = 0.05
     REACHED_DIST: ClassVar[float] = 0.04
+    SUCCESS_NEEDS_TOUCH = True
     TASK_STATE = ("goal_pos", "reached_status")
 
     def _load_scene(self, options: dict) -> None:
