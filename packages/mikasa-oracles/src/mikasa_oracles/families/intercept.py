@@ -532,8 +532,9 @@ class InterceptOracle(BallChaser):
         """Slow down and rise clear of the ball, then watch its new path."""
         if frame - self.lift_frame >= self.lift_steps:
             self.stage = "watch"
-            if bool(self.base.ball_touched[0]):
-                # Hit: fit the new path. (Missed, the ball rolls on as fitted, out of view.)
+            if bool(self.base.ball_visible[0]):
+                # Fit the path from the frames after the hit. (A ball out of view was missed:
+                # it rolls on as fitted.)
                 self.ball.refit_from(self.lift_frame + 2)
         return track(tcp, np.array([*tcp[:2], self.HOVER_Z]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))
 
