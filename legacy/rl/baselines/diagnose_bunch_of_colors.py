@@ -58,10 +58,7 @@ def main() -> None:
             with torch.no_grad():
                 action = agent.get_action(flatten_state_obs(obs), deterministic=not args.sample)
             obs, _, _, truncated, info = env.step(action)
-            terms = info.get("reward_dict")
-            if terms is not None:  # the previous step's terms (upstream order)
-                correct = max(correct, int(terms["correct_touches"][0]))
-                wrong = max(wrong, int(terms["wrong_touches"][0]))
+            correct, wrong = (int(count[0]) for count in base.touch_counts())  # as the reward counts them
             if bool(info["button_pressable"][0]):
                 if pressable_from is None:
                     pressable_from = step

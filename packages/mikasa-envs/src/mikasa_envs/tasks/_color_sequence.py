@@ -59,7 +59,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
     The set rule (touch exactly the L targets) lives here; subclasses give the cue layouts
     (``_cue_layouts`` / ``_cue_layout_index``) and, for the ordered families, the slot
     bookkeeping hooks (``_record_touches``, ``_order_ok``, ``_next_target_key``,
-    ``_touch_counts``).
+    ``touch_counts``).
     """
 
     COLORS: ClassVar[int] = NUM_COLORS
@@ -366,7 +366,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         remaining = self.sequence_cubes_mask & ~self.touched_cubes
         return torch.where(remaining.any(dim=-1), remaining.int().argmax(dim=-1), -1)
 
-    def _touch_counts(self) -> tuple[torch.Tensor, torch.Tensor]:
+    def touch_counts(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(correct, wrong) per env for the reward: targets touched, non-targets touched."""
         correct = (self.touched_cubes & self.sequence_cubes_mask).sum(dim=-1)
         wrong = (self.touched_cubes & ~self.sequence_cubes_mask).sum(dim=-1)
@@ -519,7 +519,7 @@ class ColorSequenceVLABaseEnv(MikasaVLABaseEnv):
         reaching = torch.where(goal_lost, torch.zeros_like(distance), 1 - torch.tanh(10 * distance))
         qvel_l2 = torch.linalg.norm(self.arm_qvel, dim=-1)
         static = 1 - torch.tanh(5 * qvel_l2)
-        correct, wrong = self._touch_counts()
+        correct, wrong = self.touch_counts()
         correct_reward = self.CORRECT_TOUCH_REWARD * correct.float() / self.SEQUENCE_LENGTH
         # Upstream pays nothing for the rise of CONFIRM_LIFT that confirms a press but the reaching
         # term, at most 1 a step against the touch term's 90: PPO learnt to press and then hovered

@@ -47,7 +47,7 @@ class ChainOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
         key = self.target_keys.gather(1, slot[:, None])[:, 0]
         return torch.where(mismatch.any(dim=-1), key, -1)
 
-    def _touch_counts(self) -> tuple[torch.Tensor, torch.Tensor]:
+    def touch_counts(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(slots holding their target, filled slots holding another key); upstream's
         "in order" count is the plain number of matching slots (quirk 1)."""
         matches = self.slot_matches
