@@ -45,7 +45,6 @@ def main() -> None:
     targets = base.true_color_indices.shape[1]
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=args.first_seed + episode)
-        correct = wrong = 0
         pressed = False
         registered_at = confirm_at = None  # TCP heights: where a press registered, what confirms it
         pressable_from = None  # the first step at which the button could be pressed

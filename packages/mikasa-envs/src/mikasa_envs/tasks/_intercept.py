@@ -112,6 +112,7 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         # Whether any robot link has pushed on the ball this episode (latched per env).
         self.ball_touched = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         self._robot_entities = {body.entity for link in self.agent.robot.links for body in link._bodies}
+        self._hidden_visual_p = torch.tensor(HIDDEN_VISUAL_POSITION, device=self.device)
 
     def _sample_episode(self, env_idx: torch.Tensor, options: dict) -> None:
         # Torch draws, in order: the ball's start x, y; the launch vx, vy; then the subclass's.
@@ -185,7 +186,7 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
         else out of every camera's view (physics untouched)."""
         pose = self.ball.pose.raw_pose.clone()
         hidden = ~self.ball_visible_in(frame)
-        pose[hidden, :3] = torch.tensor(HIDDEN_VISUAL_POSITION, device=pose.device)
+        pose[hidden, :3] = self._hidden_visual_p
         self.ball_visual.set_pose(Pose.create(pose))
 
     # --------------------------------------------------------------- queries

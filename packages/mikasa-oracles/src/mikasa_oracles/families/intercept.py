@@ -65,19 +65,24 @@ class BallObserver:
     def predict(self, frame: int) -> None:
         """The ball is out of view in ``frame``: move ``now`` on along the fitted path from
         the last frame seen, slowing as a rolling ball does."""
-        velocity = self.velocity()
-        if velocity is None:
+        fit = self._fit()
+        if fit is None:
             self.now = self.positions[-1]
             return
-        rolling = [f for f in self.frames if f >= self.fit_from] or self.frames[-2:]
         # The fit is the velocity at the middle of the frames it used; the speed at the last
         # one is a little lower, and every later step keeps ROLLING_DECAY of it.
-        last_velocity = velocity * ROLLING_DECAY ** (self.frames[-1] - float(np.mean(rolling)))
+        velocity, fit_frame = fit
+        last_velocity = velocity * ROLLING_DECAY ** (self.frames[-1] - fit_frame)
         steps = frame - self.frames[-1]
         self.now = self.positions[-1] + last_velocity * ROLLING_DECAY * (1 - ROLLING_DECAY**steps) / (1 - ROLLING_DECAY)
 
     def velocity(self) -> np.ndarray | None:
         """xy displacement per step, fitted by least squares (None before two frames)."""
+        fit = self._fit()
+        return None if fit is None else fit[0]
+
+    def _fit(self) -> tuple[np.ndarray, float] | None:
+        """The fitted velocity and the frame it holds for (the middle of the frames used)."""
         frames = np.asarray(self.frames, dtype=np.float64)
         positions = np.asarray(self.positions)
         rolling = frames >= self.fit_from
@@ -85,11 +90,12 @@ class BallObserver:
             frames, positions = frames[rolling], positions[rolling]
         elif len(frames) >= 2:
             # Still sliding: the last displacement, slowed to the rolling speed it settles at.
-            return (positions[-1] - positions[-2]) * 0.9
+            return (positions[-1] - positions[-2]) * 0.9, float(frames[-2:].mean())
         else:
             return None
         centred = frames - frames.mean()
-        return (centred[:, None] * (positions - positions.mean(axis=0))).sum(axis=0) / (centred**2).sum()
+        velocity = (centred[:, None] * (positions - positions.mean(axis=0))).sum(axis=0) / (centred**2).sum()
+        return velocity, float(frames.mean())
 
 
 
