@@ -47,6 +47,11 @@ fi
 "$VENV/bin/python" -m pip install -q --upgrade pip
 # torch: the CPU build 2.13.0 (pinned in requirements/dev.txt; see README "Dependency pins").
 echo "[setup] installing packages (editable) and dev tools"
-"$VENV/bin/python" -m pip install -q -r requirements/dev.txt
+# (the grep drops pip's report that openpi-client's numpy<2 pin is unmet: see below)
+"$VENV/bin/python" -m pip install -q -r requirements/dev.txt \
+  2> >(grep -v -e "^openpi-client [0-9.]* requires numpy" \
+    -e "^ERROR: pip's dependency resolver does not currently take" >&2)
+# openpi's server and client (the interoperability tests), without their numpy<2 pin.
+"$VENV/bin/python" -m pip install -q --no-deps -r requirements/openpi.txt
 "$VENV/bin/python" -m mikasa_envs.setup_assets
 echo "[setup] done: activate with 'source $VENV/bin/activate'"

@@ -1,4 +1,4 @@
-"""Remote policies (issue 15 §1): `mikasa-bench serve` and `run --policy ws://HOST:PORT`.
+"""Remote policies: `mikasa-bench serve` and `run --policy ws://HOST:PORT`.
 
 Server and clients run on 127.0.0.1 with a free port; evaluations use state
 observations (the fast non-canonical mode) on one or two short tasks. The policies
@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import torch
 from mikasa_bench import cli
-from mikasa_bench.errors import BenchError
+from mikasa_bench.errors import BenchError, EpisodeInterrupted
 from mikasa_bench.policies import resolve_policy
 from mikasa_bench.remote import (
     PolicyServer,
@@ -75,6 +75,36 @@ class CountingChunkPolicy:
         return a
 
 
+class StepCounterPolicy:
+    """Deterministic, one action a call, and its actions depend on its memory (the steps
+    since its reset): continuing an episode after losing that memory changes them."""
+
+    def __init__(self) -> None:
+        self.steps = 0
+
+    def reset(self, seed=None) -> None:
+        self.steps = 0
+
+    def forward(self, obs):
+        a = np.zeros(7, dtype=np.float32)
+        a[:3] = np.float32(0.8) * np.sin(np.array([1.0, 2.0, 3.0]) * self.steps / 5)
+        a[6] = 1.0 if self.steps // 6 % 2 == 0 else -1.0
+        self.steps += 1
+        return a
+
+
+class NanPolicy:
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def reset(self, seed=None) -> None:
+        self.calls = 0
+
+    def forward(self, obs):
+        self.calls += 1
+        return np.full(7, np.nan if self.calls == 3 else 0.0, dtype=np.float32)
+
+
 class WrongShapePolicy:
     def forward(self, obs):
         return np.zeros(3, dtype=np.float32)
@@ -97,8 +127,8 @@ class FailingPolicy:
 
 
 @contextmanager
-def serving(target: str, **kwargs):
-    server = PolicyServer(resolve_policy(target, kwargs), host="127.0.0.1", port=0).start()
+def serving(target: str, port: int = 0, **kwargs):
+    server = PolicyServer(resolve_policy(target, kwargs), host="127.0.0.1", port=port).start()
     try:
         yield server
     finally:
@@ -106,9 +136,9 @@ def serving(target: str, **kwargs):
 
 
 @contextmanager
-def raw_server(replies):
+def raw_server(replies, port: int = 0):
     """A bare websocket server: sends metadata, then ``replies(request)`` for each request
-    (bytes or str), recording the decoded requests."""
+    (bytes or str; None closes the connection instead), recording the decoded requests."""
     from websockets.sync.server import serve
 
     requests: list[dict] = []
@@ -117,9 +147,13 @@ def raw_server(replies):
         conn.send(packb({"chunk_size": 1}))
         for data in conn:
             requests.append(unpackb(data))
-            conn.send(replies(requests[-1]))
+            reply = replies(requests[-1])
+            if reply is None:
+                conn.close()
+                return
+            conn.send(reply)
 
-    server = serve(handler, "127.0.0.1", 0, compression=None, max_size=None)
+    server = serve(handler, "127.0.0.1", port, compression=None, max_size=None)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
@@ -186,6 +220,7 @@ def test_observation_round_trip_is_exact(rgb):
     request = encode_observation(obs)
     if rgb:
         assert list(request) == [
+            "observation/state",
             "observation/proprio",
             "observation/image",
             "observation/wrist_image",
@@ -193,8 +228,12 @@ def test_observation_round_trip_is_exact(rgb):
         assert request["observation/image"].shape == (128, 128, 3)
         assert np.array_equal(request["observation/wrist_image"], obs["rgb"][0, ..., 3:].numpy())
     else:
-        assert list(request) == ["observation/proprio", "observation/state"]
+        # The privileged state never travels under a key that reads as proprio.
+        assert list(request) == ["observation/state", "observation/proprio", "privileged/state"]
+        assert np.array_equal(request["privileged/state"], obs["state"][0].numpy())
+    # observation/state is the 7-D proprio, the key openpi's LIBERO-style policies read.
     assert request["observation/proprio"].shape == (7,)
+    assert np.array_equal(request["observation/state"], obs["proprio"][0].numpy())
     back = decode_observation(unpackb(packb(request)))
     assert list(back) == list(obs)
     for k in obs:
@@ -213,6 +252,7 @@ def test_requests_carry_the_documented_keys(tmp_path):
         assert set(req) == {
             "observation/proprio",
             "observation/state",
+            "privileged/state",
             "prompt",
             "env_id",
             "episode_index",
@@ -225,7 +265,8 @@ def test_requests_carry_the_documented_keys(tmp_path):
         assert req["episode_seed"] == 4242424242 + ep and req["reset"] == (step == 0)
         assert req["prompt"] == prompt and req["env_id"] == TASK
         assert req["observation/proprio"].dtype == np.float32
-        assert req["observation/proprio"].shape == (7,) and req["observation/state"].ndim == 1
+        assert req["observation/proprio"].shape == (7,) and req["privileged/state"].ndim == 1
+        assert np.array_equal(req["observation/state"], req["observation/proprio"])
 
 
 # ------------------------------------------------------------------------------------
@@ -250,7 +291,7 @@ def test_served_policy_scores_like_in_process(tmp_path, target, kwargs):
     assert _episodes(tmp_path / "local") == _episodes(tmp_path / "remote")
     local = json.loads((tmp_path / "local" / f"{TASK}.json").read_text())
     remote = json.loads((tmp_path / "remote" / f"{TASK}.json").read_text())
-    assert remote["action_chunk_size"] == local["action_chunk_size"]  # from the metadata
+    assert remote["action_chunk_size"] == local["action_chunk_size"]  # from the replies
     assert remote["model"]["target"] == server.uri
 
 
@@ -270,7 +311,7 @@ def test_two_workers_share_one_server(tmp_path):
 # ------------------------------------------------------------------------------------
 
 
-def test_reconnect_resends_the_episode_reset():
+def test_a_connection_lost_mid_episode_restarts_the_episode():
     with serving("random", seed=3) as server:
         policy = RemotePolicy(server.uri, env_id=TASK)
         obs = _fake_obs(rgb=True)
@@ -278,32 +319,113 @@ def test_reconnect_resends_the_episode_reset():
         first = [policy.forward(obs) for _ in range(3)]
         assert server.drop_connections() == 1
         time.sleep(0.1)
-        # The new connection's policy starts the episode again with the same seed.
+        # Never continued by a fresh server policy that missed the episode's start.
+        with pytest.raises(EpisodeInterrupted, match=r"episode seed 11, step 3"):
+            policy.forward(obs)
+        # Played again from its reset, on a new connection.
+        policy.reset(seed=11)
         again = policy.forward(obs)
         assert policy.n_connects == 2 and server.n_connections == 2
         assert np.array_equal(again, first[0]) and not np.array_equal(first[0], first[1])
         policy.close()
 
 
-def test_run_survives_dropped_connections(tmp_path):
-    target = f"{HERE}:StatePolicy"
-    assert _run(tmp_path / "local", target) == 0
+def test_a_connection_lost_at_an_episode_start_is_replaced_at_once():
+    with serving("random", seed=3) as server:
+        policy = RemotePolicy(server.uri, env_id=TASK)
+        policy.reset(seed=11)
+        first = policy.forward(_fake_obs(rgb=False))
+        assert server.drop_connections() == 1
+        time.sleep(0.1)
+        policy.reset(seed=11)
+        assert np.array_equal(policy.forward(_fake_obs(rgb=False)), first)
+        assert policy.n_connects == 2
+        policy.close()
+
+
+def test_dropped_connections_leave_the_results_of_an_uninterrupted_run(tmp_path):
+    """Connections dropped at random moments, a policy whose actions depend on its memory:
+    every interrupted episode is played again from its reset (on a rewound scene), so the
+    results equal the uninterrupted run's, whichever episodes were hit."""
+    target = f"{HERE}:StepCounterPolicy"
+    tasks, episodes = (TASK,), 6  # episodes 5: a second scene
+    assert _run(tmp_path / "local", target, episodes=episodes) == 0
     with serving(target) as server:
         stop = threading.Event()
 
-        def dropper():
-            while not stop.wait(0.05):
+        def dropper():  # 8 drops, 0.15 s apart: a bounded number of restarts
+            for _ in range(8):
+                if stop.wait(0.15):
+                    return
                 server.drop_connections()
 
         thread = threading.Thread(target=dropper, daemon=True)
         thread.start()
         try:
-            assert _run(tmp_path / "remote", server.uri, {"retries": 10}) == 0
+            assert _run(tmp_path / "remote", server.uri, {"retries": 10}, episodes=episodes) == 0
         finally:
             stop.set()
             thread.join()
     assert server.n_connections > 2
-    assert _episodes(tmp_path / "local") == _episodes(tmp_path / "remote")
+    assert _episodes(tmp_path / "local", tasks) == _episodes(tmp_path / "remote", tasks)
+    result = json.loads((tmp_path / "remote" / f"{TASK}.json").read_text())
+    journal = tmp_path / "remote" / "meta" / "episodes.jsonl"
+    restarts = [json.loads(line)["restarts"] for line in journal.read_text().splitlines()]
+    assert sorted(result["episode_restarts"]) == sorted(restarts)
+
+
+def test_retries_spent_stop_the_run_and_resume_finishes_it(tmp_path, capsys):
+    target = f"{HERE}:StepCounterPolicy"
+    assert _run(tmp_path / "local", target) == 0
+    counter = StepCounterPolicy()
+
+    def drop_at_step_3(request):
+        if request["episode_seed"] == 4242424242 + 1 and request["step_index"] == 3:
+            return None  # closes the connection instead of replying, on every attempt
+        if request["reset"]:
+            counter.reset()
+        return packb({"actions": counter.forward(None)})
+
+    port = _free_port()
+    with raw_server(drop_at_step_3, port) as (uri, _):
+        assert _run(tmp_path / "run", uri, {"retries": 1}) == 2
+    err = capsys.readouterr().err
+    assert f"lost the connection to policy server {uri} (episode seed 4242424243, step 3)" in err
+    assert "restarted 1 time(s), the most the policy allows" in err
+    journal = tmp_path / "run" / "meta" / "episodes.jsonl"
+    assert [json.loads(line)["episode"] for line in journal.read_text().splitlines()] == [0]
+    # --resume keeps the run's settings: the server comes back at the same address.
+    with serving(target, port=port):
+        argv = ["run", "--resume", str(tmp_path / "run"), "--no-progress", "--no-report"]
+        assert cli.main(argv) == 0
+    assert _episodes(tmp_path / "local") == _episodes(tmp_path / "run")
+
+
+def test_chunk_sizes_come_from_the_replies(tmp_path):
+    calls = []
+
+    def alternating(request):  # K = 2, 3, 2, 3, ... whatever the metadata says (1)
+        calls.append(1)
+        return packb({"actions": np.zeros((2 + len(calls) % 2, 7), np.float32)})
+
+    with raw_server(alternating) as (uri, _):
+        assert _run(tmp_path / "run", uri) == 0
+    result = json.loads((tmp_path / "run" / f"{TASK}.json").read_text())
+    assert result["action_chunk_size"] == 3 and result["action_chunk_size_varied"] is True
+    journal = tmp_path / "run" / "meta" / "episodes.jsonl"
+    assert [
+        json.loads(line)["action_chunk_sizes"] for line in journal.read_text().splitlines()
+    ] == [
+        [2, 3],
+        [2, 3],
+    ]
+
+
+def test_non_finite_actions_of_an_in_process_policy_name_the_step(tmp_path, capsys):
+    assert _run(tmp_path / "run", f"{HERE}:NanPolicy") == 2
+    err = capsys.readouterr().err
+    assert "non-finite actions (NaN or inf) at step 2" in err
+    assert f"{TASK} episode 0 (seed 4242424242)" in err
 
 
 # ------------------------------------------------------------------------------------

@@ -6,7 +6,13 @@ the parallel resumable runner and the result/report helpers are re-exported here
 """
 
 from .episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
-from .errors import BenchError, EpisodeFailedError, PolicyOutputError, UnknownTaskError
+from .errors import (
+    BenchError,
+    EpisodeFailedError,
+    EpisodeInterrupted,
+    PolicyOutputError,
+    UnknownTaskError,
+)
 from .executor import (
     EpisodeJob,
     EpisodeOutcome,
@@ -108,6 +114,7 @@ __all__ = [
     "BenchError",
     "UnknownTaskError",
     "PolicyOutputError",
+    "EpisodeInterrupted",
     "EpisodeFailedError",
     "__version__",
 ]

@@ -23,6 +23,7 @@ from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 __all__ = [
     "EpisodeResult",
     "EpisodeRngs",
+    "RecordedActions",
     "first_value",
     "make_benchmark_env",
     "normalize_action_chunk",
@@ -33,12 +34,14 @@ __all__ = [
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """Outcome of one episode: the success latch, summed reward, steps taken, seed."""
+    """Outcome of one episode: the success latch, summed reward, steps taken, seed, and the
+    lengths K of the action chunks the policy returned (distinct, ascending)."""
 
     success_once: bool
     episode_return: float
     n_steps: int
     seed: int
+    chunk_sizes: tuple[int, ...] = ()
 
 
 def seed_global_rngs(seed: int) -> None:
@@ -179,6 +182,7 @@ def run_episode(
     frame_sink: Callable[[np.ndarray], None] | None = None,
     own_global_rngs: bool = False,
     fresh_scene: bool = False,
+    action_sink: Callable[[Any], None] | None = None,
 ) -> tuple[EpisodeResult, list[np.ndarray] | None]:
     """Run one episode of ``env`` (already wrapped, ``num_envs=1``) with ``policy``.
 
@@ -197,7 +201,9 @@ def run_episode(
     ``own_global_rngs`` (for episodes run in threads of one process): the policy's calls
     see the episode's own global RNG states (`EpisodeRngs`) instead of the process's.
     ``fresh_scene``: the reset rebuilds the scene (``reconfigure``), as every
-    `EPISODES_PER_SCENE`-th episode does (`starts_scene`).
+    `EPISODES_PER_SCENE`-th episode does (`starts_scene`). ``action_sink`` receives each
+    action (float32, shape of the action space) before it is stepped: `replay_actions`
+    plays them again. Non-finite actions raise `PolicyOutputError` naming the step.
     """
     import torch
 
@@ -228,6 +234,7 @@ def run_episode(
         from .video import compose_frame
 
     queue: deque[Any] = deque()
+    chunk_sizes: set[int] = set()
     success, total, n_steps = False, 0.0, 0
     for _ in range(int(max_steps)):
         if sink is not None:
@@ -235,7 +242,15 @@ def run_episode(
         if not queue:
             with policy_rngs():
                 output = policy.forward(obs)
-            queue.extend(normalize_action_chunk(output, action_shape))
+            chunk = normalize_action_chunk(output, action_shape)
+            if not all(bool(torch.isfinite(a).all()) for a in chunk):
+                raise PolicyOutputError(
+                    f"policy.forward returned non-finite actions (NaN or inf) at step {n_steps}"
+                )
+            chunk_sizes.add(len(chunk))
+            queue.extend(chunk)
+        if action_sink is not None:
+            action_sink(queue[0])
         action = queue.popleft().to(device=device, dtype=torch.float32).unsqueeze(0)
         obs, reward, terminated, truncated, info = env.step(action)
         n_steps += 1
@@ -246,7 +261,24 @@ def run_episode(
             break
     if sink is not None:
         sink(compose_frame(env.render(), obs))  # the state after the last step
-    return EpisodeResult(bool(success), float(total), n_steps, int(episode_seed)), frames
+    result = EpisodeResult(
+        bool(success), float(total), n_steps, int(episode_seed), tuple(sorted(chunk_sizes))
+    )
+    return result, frames
+
+
+class RecordedActions:
+    """A policy that plays back recorded actions, all in one chunk (`run_episode`'s
+    ``action_sink`` records them): the same env calls as the episode that recorded them,
+    so the env ends in the same state."""
+
+    def __init__(self, actions: Sequence[Any]) -> None:
+        import torch
+
+        self.actions = torch.stack(list(actions)) if len(actions) else torch.zeros(0)
+
+    def forward(self, obs: Any) -> Any:
+        return self.actions
 
 
 def _tee(*sinks: Callable[[np.ndarray], None]) -> Callable[[np.ndarray], None]:

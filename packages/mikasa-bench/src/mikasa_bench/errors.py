@@ -6,7 +6,13 @@ is a `BenchError`: the CLI prints its message without a traceback and exits with
 
 from __future__ import annotations
 
-__all__ = ["BenchError", "PolicyOutputError", "UnknownTaskError", "EpisodeFailedError"]
+__all__ = [
+    "BenchError",
+    "PolicyOutputError",
+    "UnknownTaskError",
+    "EpisodeFailedError",
+    "EpisodeInterrupted",
+]
 
 
 class BenchError(ValueError):
@@ -23,3 +29,9 @@ class PolicyOutputError(BenchError):
 
 class EpisodeFailedError(BenchError):
     """An episode raised in a worker; the message names the task, episode and seed."""
+
+
+class EpisodeInterrupted(BenchError):
+    """The policy lost its memory of the episode in progress (e.g. the connection to its
+    server dropped mid-episode): the episode must be played again from its reset, never
+    continued. Workers restart it up to the policy's ``max_episode_restarts`` times."""

@@ -25,6 +25,7 @@ workers on other machines.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing as mp
 import os
 import queue
@@ -37,8 +38,8 @@ from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
-from .episode import EpisodeResult, make_benchmark_env, run_episode
-from .errors import BenchError
+from .episode import EpisodeResult, RecordedActions, make_benchmark_env, run_episode
+from .errors import BenchError, EpisodeInterrupted
 from .policies import PolicySpec, build_policy, policy_chunk_size
 from .protocol import BenchmarkConfig, scene_start, starts_scene
 from .render import apply_environment, check_render_device, worker_environment
@@ -56,6 +57,8 @@ __all__ = [
     "available_cores",
     "render_config",
 ]
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,9 @@ class EpisodeOutcome:
     cpu_s: float = 0.0
     """CPU time of the worker process (all its threads, e.g. lavapipe's) over the
     episode, env build excluded: what an episode costs, whatever else runs on the host."""
+    restarts: int = 0
+    """How often the episode was played again from its reset because the policy lost its
+    memory of it (`EpisodeInterrupted`, e.g. a policy server's connection dropped)."""
 
     def describe_failure(self) -> str:
         """A message naming the task, episode, seed and policy of a failed job."""
@@ -144,6 +150,8 @@ class _EpisodeWorker:
         self.render: str | None = None
         self.last_played: tuple[Hashable, int] | None = None
         """(scene key, episode) of the last episode played on the env's current scene."""
+        self.scene_actions: dict[int, list[Any]] = {}
+        """The actions of each episode played on the env's current scene (`_rewind`)."""
 
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
@@ -170,26 +178,18 @@ class _EpisodeWorker:
             replayed = self._replay_scene_history(job, env, policy)
             setup_s = 0.0 if cached and not replayed else time.perf_counter() - t0
             cpu0 = time.process_time()
-            chunk = policy_chunk_size(policy)
-            video = None
-            if job.config.save_videos:
-                from .video import EpisodeVideo
-
-                with EpisodeVideo() as recorder:
-                    result = self._play(job, job.episode, env, policy, frame_sink=recorder.add)
-                    video = recorder.finish()
-            else:
-                result = self._play(job, job.episode, env, policy)
+            result, video, restarts = self._play_whole(job, env, policy)
             return EpisodeOutcome(
                 job,
                 result,
-                chunk,
+                max(result.chunk_sizes, default=policy_chunk_size(policy)),
                 time.perf_counter() - t0,
                 self.worker_id,
                 video=video,
                 render=self.render,
                 setup_s=setup_s,
                 cpu_s=time.process_time() - cpu0,
+                restarts=restarts,
             )
         except Exception as exc:
             # The env may be mid-episode: drop it so a later job starts clean.
@@ -205,11 +205,51 @@ class _EpisodeWorker:
                 user_error=isinstance(exc, BenchError),
             )
 
-    def _play(self, job: EpisodeJob, episode: int, env: Any, policy: Any, **kwargs: Any) -> EpisodeResult:
-        """Play episode ``episode`` of ``job``'s task (a fresh scene where `starts_scene`)."""
+    def _play_whole(
+        self, job: EpisodeJob, env: Any, policy: Any
+    ) -> tuple[EpisodeResult, bytes | None, int]:
+        """Play ``job``'s episode to its end: its result, video and restarts.
+
+        An episode whose policy lost its memory of it (`EpisodeInterrupted`) is played
+        again from its reset on a rewound scene, never continued, up to the policy's
+        ``max_episode_restarts`` times; then the error stops the run (``--resume``
+        plays the episode again)."""
+        restarts = 0
+        while True:
+            try:
+                if not job.config.save_videos:
+                    return self._play(job, job.episode, env, policy), None, restarts
+                from .video import EpisodeVideo
+
+                with EpisodeVideo() as recorder:
+                    result = self._play(job, job.episode, env, policy, frame_sink=recorder.add)
+                    return result, recorder.finish(), restarts
+            except EpisodeInterrupted as exc:
+                allowed = int(getattr(policy, "max_episode_restarts", 0))
+                if restarts >= allowed:
+                    raise EpisodeInterrupted(
+                        f"{exc}; the episode was restarted {restarts} time(s), the most the "
+                        f"policy allows"
+                    ) from None
+                restarts += 1
+                logger.warning(
+                    "%s episode %d (seed %d): %s; playing it again from its reset "
+                    "(restart %d of %d)",
+                    *(job.task.env_id, job.episode, job.seed, exc, restarts, allowed),
+                )
+                self._rewind(job, env)
+
+    def _play(
+        self, job: EpisodeJob, episode: int, env: Any, policy: Any, **kwargs: Any
+    ) -> EpisodeResult:
+        """Play episode ``episode`` of ``job``'s task (a fresh scene where `starts_scene`)
+        and keep its actions for `_rewind`."""
         from mikasa_envs.render_batcher import participating
 
         self.last_played = None  # until it has finished
+        if starts_scene(episode):
+            self.scene_actions = {}
+        actions: list[Any] = []
         # The episode (not the env build) takes part in shared render passes when this
         # process runs several workers (mikasa_envs.render_batcher); else a no-op.
         with participating():
@@ -219,10 +259,22 @@ class _EpisodeWorker:
                 job.seed_of(episode),
                 own_global_rngs=self.threaded,
                 fresh_scene=starts_scene(episode),
+                action_sink=actions.append,
                 **kwargs,
             )
+        self.scene_actions[episode] = actions
         self.last_played = (job.scene_key, episode)
         return result
+
+    def _rewind(self, job: EpisodeJob, env: Any) -> None:
+        """Bring the env's scene back to where ``job``'s episode starts after an
+        interrupted attempt: the scene is built again and the episodes before it replay
+        their recorded actions (no policy call), so the physics the episode meets is the
+        same as on its first attempt."""
+        recorded = dict(self.scene_actions)  # _play starts the dict afresh with the scene
+        for episode in range(scene_start(job.episode), job.episode):
+            replay = RecordedActions(recorded[episode])
+            self._play(job, episode, env, replay, reset_policy_hook=False)
 
     def _replay_scene_history(self, job: EpisodeJob, env: Any, policy: Any) -> bool:
         """Play (and discard) the episodes that precede ``job`` on its scene, unless the

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BenchError
+from .errors import BenchError, EpisodeInterrupted
 from .policies import ACTION_SHAPE, PolicySpec
 from .remote_protocol import (
     PROTOCOL_VERSION,
@@ -72,13 +72,17 @@ class _Socket:
 
 
 class RemotePolicy:
-    """A policy served elsewhere (``mikasa-bench serve`` or any server speaking the same
-    protocol); built per worker by `mikasa_bench.policies.build_policy`.
+    """A policy served elsewhere (``mikasa-bench serve``, openpi's ``WebsocketPolicyServer``
+    or any server speaking the same protocol); built per worker by
+    `mikasa_bench.policies.build_policy`.
 
-    ``timeout_s``: the longest wait for one reply (then a `BenchError` naming the server);
-    ``connect_timeout_s``: per connection attempt; ``retries``: reconnection attempts
-    after a failed connect or a dropped connection (with backoff), each new connection
-    being sent the episode's reset again.
+    ``timeout_s``: the longest wait for one reply, and the only clock of a connection (no
+    websocket keepalive runs: a server busy computing answers no pings); past it, a
+    `BenchError` naming the server. ``connect_timeout_s``: per connection attempt.
+    ``retries``: connection attempts after the first (with backoff), and how often an
+    episode may be restarted: a connection lost mid-episode raises `EpisodeInterrupted`,
+    and the worker plays the episode again from its reset on a new connection (the
+    server's fresh policy), never continuing it with a policy that forgot its start.
     """
 
     def __init__(
@@ -114,8 +118,20 @@ class RemotePolicy:
         self._episode_seed: int | None = None
         self._step_index = 0
         self._reset_pending = False
+        self.chunk_sizes_seen: set[int] = set()
+        """The chunk lengths K of the replies received so far."""
         self._connect_with_retries()
-        self.chunk_size = self._chunk_from_metadata()
+        self._declared_chunk_size = self._chunk_from_metadata()
+
+    @property
+    def chunk_size(self) -> int:
+        """The largest chunk K received so far (before any reply: the metadata's, else 1)."""
+        return max(self.chunk_sizes_seen, default=self._declared_chunk_size)
+
+    @property
+    def max_episode_restarts(self) -> int:
+        """How often the worker may restart an episode whose connection dropped."""
+        return self.retries
 
     # -- connection -------------------------------------------------------------------
 
@@ -128,6 +144,11 @@ class RemotePolicy:
             open_timeout=self.connect_timeout_s,
             compression=None,
             max_size=None,
+            # No keepalive pings: openpi's server computes inside its event loop and answers
+            # none meanwhile, so a slow inference would end the connection whatever
+            # timeout_s says. The wait for each reply is bounded by timeout_s instead.
+            ping_interval=None,
+            ping_timeout=None,
         )
         try:
             first = ws.recv(timeout=self.timeout_s)
@@ -181,8 +202,8 @@ class RemotePolicy:
         )
 
     def _chunk_from_metadata(self) -> int:
-        # openpi servers send no chunk_size: the replies' K is used as it comes (default 1
-        # is only what gets recorded as action_chunk_size).
+        # openpi servers send no chunk_size: the replies' K is used as it comes, and the
+        # runner records the K it received (`chunk_size` once replies have come).
         k = self.metadata.get("chunk_size", 1)
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k <= 0:
             raise BenchError(
@@ -217,24 +238,20 @@ class RemotePolicy:
         }
 
     def forward(self, obs: Mapping[str, Any]) -> np.ndarray:
-        """Send ``obs``, return the server's actions (checked: ``A``, ``(K, *A)`` or ``(1, K, *A)``)."""
+        """Send ``obs``, return the server's actions (checked: ``A``, ``(K, *A)`` or ``(1, K, *A)``).
+
+        A connection lost at the episode's first request is replaced at once (the
+        request carries ``reset``); lost later, it raises `EpisodeInterrupted`: the
+        server's policy has lost the episode's earlier steps, so the episode must start
+        over (the next `reset` and `forward` connect again).
+        """
         websockets, _ = require_remote_deps()
         message = self.request(obs)
-        where = f"episode {message['episode_index']}, step {message['step_index']}"
+        where = self._where(message)
         attempts = 0
         while True:
             if self._sock.ws is None:
                 self._connect_with_retries()
-                if self._episode_seed is not None or self._reset_pending:
-                    # A fresh connection has a fresh policy: restart the episode there.
-                    message["reset"] = True
-                    if not self._reset_pending:
-                        logger.warning(
-                            "reconnected to %s at %s; the server's policy was reset, so a "
-                            "recurrent policy lost its memory of this episode's earlier steps",
-                            self.uri,
-                            where,
-                        )
             try:
                 self._sock.ws.send(packb(message))
                 data = self._sock.ws.recv(timeout=self.timeout_s)
@@ -247,19 +264,34 @@ class RemotePolicy:
                     f"({where}); raise it with --policy-kwargs '{{\"timeout_s\": 120}}'"
                 ) from None
             except (OSError, websockets.exceptions.ConnectionClosed) as exc:
-                closed_by_error = getattr(getattr(exc, "rcvd", None), "code", None) == 1011
+                # 1011 is a server's error, unless its own keepalive gave up on us.
+                rcvd = getattr(exc, "rcvd", None)
+                closed_by_error = getattr(rcvd, "code", None) == 1011 and "keepalive" not in str(
+                    getattr(rcvd, "reason", "")
+                )
                 self._sock.close()
+                lost = f"lost the connection to policy server {self.uri} ({where}): {type(exc).__name__}: {exc}"
+                if closed_by_error:
+                    raise BenchError(lost) from None
+                if not self._reset_pending:
+                    raise EpisodeInterrupted(lost) from None
                 attempts += 1
-                if closed_by_error or attempts > self.retries:
-                    raise BenchError(
-                        f"lost the connection to policy server {self.uri} ({where}): "
-                        f"{type(exc).__name__}: {exc}"
-                    ) from None
+                if attempts > self.retries:
+                    raise BenchError(lost) from None
                 logger.warning("connection to %s dropped (%s); reconnecting", self.uri, exc)
         self._reset_pending = False
         actions = self._check_reply(data, where)
-        self._step_index += 1 if actions.shape == self.action_shape else actions.shape[-2]
+        k = 1 if actions.shape == self.action_shape else actions.shape[-len(self.action_shape) - 1]
+        self.chunk_sizes_seen.add(int(k))
+        self._step_index += int(k)
         return actions
+
+    def _where(self, message: Mapping[str, Any]) -> str:
+        seed = message["episode_seed"]
+        episode = (
+            f"episode seed {seed}" if seed is not None else f"episode {message['episode_index']}"
+        )
+        return f"{episode}, step {message['step_index']}"
 
     def _check_reply(self, data: Any, where: str) -> np.ndarray:
         if isinstance(data, str):
@@ -307,6 +339,14 @@ class RemotePolicy:
                 f"policy server {self.uri} returned actions of shape {actions.shape} ({where}); "
                 f"accepted: one action {a}, a chunk (K, {dims}) or a batched chunk "
                 f"(1, K, {dims}) with K >= 1"
+            )
+        finite = np.isfinite(actions.astype(np.float64, copy=False))
+        if not finite.all():
+            bad = np.argwhere(~finite)[0].tolist()
+            raise BenchError(
+                f"policy server {self.uri} returned non-finite actions ({where}): "
+                f"{int((~finite).sum())} of {actions.size} values are NaN or inf, the first "
+                f"at index {tuple(bad)}"
             )
         return actions
 

@@ -1,9 +1,14 @@
 """Wire format of remote policies (openpi's websocket policy protocol): msgpack with
-numpy arrays, and the observation <-> request encoding.
+numpy arrays, the observation <-> request encoding, and the check of a request's keys.
 
 numpy arrays travel as maps ``{"__ndarray__": True, "data": <raw bytes>, "dtype": <numpy
 dtype str>, "shape": [...]}`` (openpi's ``msgpack_numpy`` convention, keys packed as
 bytes), numpy scalars as ``{"__npgeneric__": True, "data": <item>, "dtype": ...}``.
+
+Request keys follow openpi's LIBERO-style policies: the cameras as ``observation/image``
+and ``observation/wrist_image``, the 7-D proprioception as ``observation/state`` (and, for
+clients of protocol 1, ``observation/proprio``); the privileged simulator state of a
+state-mode run travels as ``privileged/state``, a key no one mistakes for proprioception.
 
 The observation encoding is exact: `decode_observation(encode_observation(obs))` gives
 tensors equal to ``obs`` in dtype, shape and value, so a deterministic policy scores the
@@ -26,7 +31,11 @@ __all__ = [
     "DEFAULT_PORT",
     "INSTALL_HINT",
     "OBS_PREFIX",
+    "PRIVILEGED_STATE_KEY",
+    "PROPRIO_DIM",
+    "REQUEST_KEYS",
     "actions_to_numpy",
+    "check_request",
     "decode_observation",
     "describe_value",
     "encode_observation",
@@ -37,12 +46,32 @@ __all__ = [
     "uri_with_env_id",
 ]
 
-PROTOCOL_VERSION = 1
-"""Bumped when request/reply keys change meaning (sent in the server's metadata)."""
+PROTOCOL_VERSION = 2
+"""Bumped when request/reply keys change meaning (sent in the server's metadata). 2:
+``observation/state`` is the 7-D proprio (openpi's key), the privileged state moved to
+``privileged/state``."""
 
 INSTALL_HINT = 'pip install "mikasa-bench[remote]"'
 OBS_PREFIX = "observation/"
 _IMAGE_KEYS = ("image", "wrist_image")  # the two 3-channel cameras of ``rgb`` (top, wrist)
+PROPRIO_KEYS = (OBS_PREFIX + "state", OBS_PREFIX + "proprio")  # the same 7 values, both sent
+PRIVILEGED_STATE_KEY = "privileged/state"
+PROPRIO_DIM = 7  # end-effector xyz, roll-pitch-yaw, gripper
+REQUEST_KEYS: dict[str, str] = {
+    OBS_PREFIX + "image": "uint8 (H, W, 3), top camera",
+    OBS_PREFIX + "wrist_image": "uint8 (H, W, 3), wrist camera",
+    OBS_PREFIX + "state": f"float ({PROPRIO_DIM},), proprioception",
+    OBS_PREFIX + "proprio": f"float ({PROPRIO_DIM},), the same proprioception",
+    OBS_PREFIX + "task_cue": "numeric (N,), the task cue of some families",
+    PRIVILEGED_STATE_KEY: "float (D,), privileged simulator state (state mode)",
+    "prompt": "str",
+    "env_id": "str or nil",
+    "episode_index": "int",
+    "step_index": "int",
+    "episode_seed": "int or nil",
+    "reset": "bool",
+}
+"""What a request may hold: key -> type and shape (`check_request`)."""
 DEFAULT_PORT = 8000  # openpi's default
 
 
@@ -117,12 +146,14 @@ def unpackb(data: bytes) -> Any:
 
 
 def encode_observation(obs: Mapping[str, Any]) -> dict[str, Any]:
-    """The ``observation/*`` entries of a request for the runner's observation ``obs``.
+    """The observation entries of a request for the runner's observation ``obs``.
 
     Every tensor or array (batch of one env) is sent without its batch axis as a numpy
     array of the same dtype; ``rgb`` ``(1, H, W, 6)`` is split into its two cameras,
-    ``observation/image`` (top) and ``observation/wrist_image`` ``(H, W, 3)``. Other
-    msgpack-able values are sent as they are. Key order is kept.
+    ``observation/image`` (top) and ``observation/wrist_image`` ``(H, W, 3)``; ``proprio``
+    goes as ``observation/state`` (openpi's key) and ``observation/proprio``; the
+    privileged ``state`` as ``privileged/state``; any other key ``k`` as
+    ``observation/k``. Key order is kept.
     """
     out: dict[str, Any] = {}
     for key, value in obs.items():
@@ -139,7 +170,13 @@ def encode_observation(obs: Mapping[str, Any]) -> dict[str, Any]:
                 out[OBS_PREFIX + _IMAGE_KEYS[0]] = np.ascontiguousarray(value[..., :3])
                 out[OBS_PREFIX + _IMAGE_KEYS[1]] = np.ascontiguousarray(value[..., 3:])
                 continue
-        out[OBS_PREFIX + str(key)] = value
+        if key == "proprio":
+            for proprio_key in PROPRIO_KEYS:
+                out[proprio_key] = value
+        elif key == "state":
+            out[PRIVILEGED_STATE_KEY] = value
+        else:
+            out[OBS_PREFIX + str(key)] = value
     return out
 
 
@@ -150,9 +187,16 @@ def decode_observation(request: Mapping[str, Any]) -> dict[str, Any]:
 
     obs: dict[str, Any] = {}
     for key, value in request.items():
-        if not isinstance(key, str) or not key.startswith(OBS_PREFIX):
+        if key == PRIVILEGED_STATE_KEY:
+            name = "state"
+        elif isinstance(key, str) and key.startswith(OBS_PREFIX):
+            name = key[len(OBS_PREFIX) :]
+        else:
             continue
-        name = key[len(OBS_PREFIX) :]
+        if key == PROPRIO_KEYS[0]:
+            if PROPRIO_KEYS[1] in request:
+                continue  # the same values: taken from observation/proprio
+            name = "proprio"
         if name == _IMAGE_KEYS[1] and OBS_PREFIX + _IMAGE_KEYS[0] in request:
             continue  # joined with the top camera below
         if name == _IMAGE_KEYS[0] and OBS_PREFIX + _IMAGE_KEYS[1] in request:
@@ -162,6 +206,63 @@ def decode_observation(request: Mapping[str, Any]) -> dict[str, Any]:
             value = torch.from_numpy(np.ascontiguousarray(value)).unsqueeze(0)
         obs[name] = value
     return obs
+
+
+def check_request(request: Any) -> None:
+    """`BenchError` naming every unknown key and every value of the wrong type or shape in
+    a request (a msgpack map from a client), with the accepted keys; None if it is fine."""
+    if not isinstance(request, dict):
+        raise BenchError(f"a request must be a msgpack map, got {describe_value(request)}")
+    problems = [f"unknown key {key!r}" for key in request if key not in REQUEST_KEYS]
+    for key, value in request.items():
+        if key in REQUEST_KEYS:
+            problem = _value_problem(key, value)
+            if problem:
+                problems.append(f"{key!r} is {describe_value(value)}; expected {problem}")
+    images = [OBS_PREFIX + k for k in _IMAGE_KEYS]
+    if (images[0] in request) != (images[1] in request):
+        problems.append(f"{images[0]!r} and {images[1]!r} come together (the two cameras)")
+    elif images[0] in request and not problems:
+        if request[images[0]].shape != request[images[1]].shape:
+            problems.append("the two camera images differ in shape")
+    if not problems and all(k in request for k in PROPRIO_KEYS):
+        if not np.array_equal(request[PROPRIO_KEYS[0]], request[PROPRIO_KEYS[1]]):
+            problems.append(
+                f"{PROPRIO_KEYS[0]!r} and {PROPRIO_KEYS[1]!r} differ (both are the proprio)"
+            )
+    if problems:
+        accepted = "; ".join(f"{k}: {v}" for k, v in REQUEST_KEYS.items())
+        raise BenchError("bad request: " + "; ".join(problems) + f". Accepted keys: {accepted}")
+
+
+def _value_problem(key: str, value: Any) -> str | None:
+    """What ``value`` of request key ``key`` should have been, or None if it is right."""
+    kind = REQUEST_KEYS[key]
+    if key.startswith(OBS_PREFIX) or key == PRIVILEGED_STATE_KEY:
+        if not isinstance(value, np.ndarray):
+            return kind
+        if key.endswith("image"):
+            ok = value.dtype == np.uint8 and value.ndim == 3 and value.shape[-1] == 3
+        elif key in PROPRIO_KEYS:
+            ok = np.issubdtype(value.dtype, np.floating) and value.shape == (PROPRIO_DIM,)
+        elif key == PRIVILEGED_STATE_KEY:
+            ok = np.issubdtype(value.dtype, np.floating) and value.ndim == 1
+        else:  # task_cue
+            ok = (
+                np.issubdtype(value.dtype, np.number) or value.dtype == np.bool_
+            ) and value.ndim == 1
+        return None if ok else kind
+    allowed: tuple[type, ...] = {
+        "prompt": (str,),
+        "env_id": (str, type(None)),
+        "episode_index": (int, np.integer),
+        "step_index": (int, np.integer),
+        "episode_seed": (int, np.integer, type(None)),
+        "reset": (bool, np.bool_),
+    }[key]
+    if isinstance(value, bool) and bool not in allowed:
+        return kind
+    return None if isinstance(value, allowed) else kind
 
 
 def actions_to_numpy(output: Any) -> np.ndarray:

@@ -4,8 +4,10 @@ On each connection the server builds one policy instance (recurrent state of dif
 workers never mixes), sends its metadata, then answers every request with the policy's
 actions. A request whose ``reset`` is true resets that instance with the episode seed
 before ``forward``, and the policy's calls see the episode's own global RNG states
-(`EpisodeRngs`), as in a runner's worker thread. If the policy raises, the traceback is
-sent as a text message and the connection is closed (as openpi's server does).
+(`EpisodeRngs`), as in a runner's worker thread. Every request is checked first
+(`check_request`: unknown keys, wrong types or shapes are named). If the check or the
+policy fails, the error is sent as a text message and the connection is closed (as
+openpi's server does).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from .remote_protocol import (
     DEFAULT_PORT,
     PROTOCOL_VERSION,
     actions_to_numpy,
+    check_request,
     decode_observation,
     packb,
     require_remote_deps,
@@ -238,10 +241,7 @@ class PolicyServer:
                 if isinstance(data, str):
                     raise BenchError("expected a binary msgpack request, got a text message")
                 request = unpackb(data)
-                if not isinstance(request, dict):
-                    raise BenchError(
-                        f"a request must be a msgpack map, got {type(request).__name__}"
-                    )
+                check_request(request)
                 if request.get("reset"):
                     seed = request.get("episode_seed")
                     # The episode's own global RNG states, as a runner thread gives them

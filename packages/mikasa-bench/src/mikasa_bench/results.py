@@ -119,10 +119,15 @@ def build_task_result(
     commit: str | None = None,
     wall_time_s: float | None = None,
     videos: Sequence[str | None] | None = None,
+    restarts: Sequence[int] | None = None,
 ) -> dict[str, Any]:
     """The per-task result dict: the keys of benchmark.md §7.1 in order, then extensions
-    (``sr_ci95``, ``mean_episode_length``, the remaining protocol settings, wall time and,
-    with videos, each episode's video path relative to the run directory)."""
+    (``sr_ci95``, ``mean_episode_length``, the remaining protocol settings, wall time,
+    ``action_chunk_size_varied`` (whether the policy's chunks had more than one length K;
+    ``action_chunk_size`` is the largest), ``episode_restarts`` (how often each episode was
+    played again from its reset after its policy lost it, e.g. a dropped server
+    connection) and, with videos, each episode's video path relative to the run
+    directory)."""
     if len(episodes) != config.n_episodes:
         raise ValueError(f"{task.env_id}: {len(episodes)} episodes, expected {config.n_episodes}")
     successes = [bool(e.success_once) for e in episodes]
@@ -145,7 +150,9 @@ def build_task_result(
         "control_mode": config.control_mode,
         "obs_mode": config.obs_mode,
         "wrapper_chain": config.wrapper_chain,
-        "action_chunk_size": int(action_chunk_size),
+        "action_chunk_size": max(
+            [int(action_chunk_size)] + [k for e in episodes for k in e.chunk_sizes]
+        ),
         "model": dict(model or {}),
         "episode_lengths": lengths,
         "episode_seeds": [int(e.seed) for e in episodes],
@@ -160,6 +167,8 @@ def build_task_result(
         "policy_batch": config.policy_batch,
         "canonical": settings["canonical"],
         "wall_time_s": wall_time_s,
+        "action_chunk_size_varied": len({k for e in episodes for k in e.chunk_sizes}) > 1,
+        "episode_restarts": [int(r) for r in restarts] if restarts is not None else [0] * n,
     }
     if videos is not None:
         out["videos"] = list(videos)
@@ -428,10 +437,12 @@ class RunStore:
         wall_s: float,
         video: str | None = None,
         render: str | None = None,
+        restarts: int = 0,
     ) -> dict[str, Any] | None:
         """Journal one finished episode; when it completes its task, write the task file
         and the summary and return the task result (else None). ``video``: its path
-        relative to the run dir; ``render``: where the worker rendered."""
+        relative to the run dir; ``render``: where the worker rendered; ``restarts``: how
+        often it was played again from its reset (`EpisodeOutcome.restarts`)."""
         if env_id in self.finished or episode in self.partial.get(env_id, {}):
             raise RuntimeError(f"episode {episode} of {env_id} recorded twice")
         rec = {
@@ -442,6 +453,8 @@ class RunStore:
             "episode_return": float(result.episode_return),
             "n_steps": int(result.n_steps),
             "action_chunk_size": int(action_chunk_size),
+            "action_chunk_sizes": [int(k) for k in result.chunk_sizes],
+            "restarts": int(restarts),
             "wall_s": float(wall_s),
         }
         if video is not None:
@@ -465,18 +478,25 @@ class RunStore:
         task = next(t for t in self.tasks if t.env_id == env_id)
         recs = [self.partial[env_id][i] for i in range(self.config.n_episodes)]
         episodes = [
-            EpisodeResult(r["success_once"], r["episode_return"], r["n_steps"], r["seed"])
+            EpisodeResult(
+                r["success_once"],
+                r["episode_return"],
+                r["n_steps"],
+                r["seed"],
+                tuple(r.get("action_chunk_sizes", ())),  # journals of older versions lack it
+            )
             for r in recs
         ]
         result = build_task_result(
             task,
             self.config,
             episodes,
-            action_chunk_size=recs[0]["action_chunk_size"],
+            action_chunk_size=max(r["action_chunk_size"] for r in recs),
             model=self.meta["model"],
             commit=self.commit,
             wall_time_s=sum(r["wall_s"] for r in recs),
             videos=[r.get("video") for r in recs] if self.config.save_videos else None,
+            restarts=[r.get("restarts", 0) for r in recs],
         )
         atomic_write_json(self.run_dir / f"{env_id}.json", result)
         self.finished[env_id] = result

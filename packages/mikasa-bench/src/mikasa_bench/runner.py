@@ -111,6 +111,7 @@ def execute_runs(
                     wall_s=outcome.wall_s,
                     video=video,
                     render=outcome.render,
+                    restarts=outcome.restarts,
                 )
                 bar.update(1)
                 if finished is not None:
