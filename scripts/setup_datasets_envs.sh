@@ -27,8 +27,16 @@
 #     for torch<2.11). Then `python -m mikasa_envs.setup_assets`, as scripts/setup.sh does:
 #     the envs use only the robot assets shipped in the mani-skill wheel plus the light
 #     meshes generated from them, so ManiSkill never prompts for or starts a download.
+#   * a start-up hook that makes `import torchvision` work in every Python process of the
+#     environment (plain `lerobot-train`, `lerobot-eval`, `python -c "import torchvision"`):
+#     PyPI's torchvision 0.28.0 is a CUDA build whose `_C` ops library cannot load next to
+#     the CPU torch, and its import then dies with "operator torchvision::nms does not
+#     exist". packages/mikasa-datasets/src/mikasa_datasets/torchvision_cpu.py is copied into
+#     site-packages as `_mikasa_torchvision_cpu.py` with `_mikasa_torchvision_cpu.pth`, whose
+#     line installs a lazy import hook (nothing is imported at start-up; see that module).
 #
-# Idempotent: a stamp file records the pinned set; re-running with the same pins is a no-op.
+# Idempotent: a stamp file records the pinned set; re-running with the same pins is a no-op
+# apart from refreshing the editable installs and the torchvision hook when they changed.
 # Usage: scripts/setup_datasets_envs.sh     (env: PYTHON=python3.11, MIKASA_DATASETS_VENV=path)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -112,11 +120,30 @@ sys.exit(0 if all(s is not None and (s.origin or "").startswith(root) for s in s
 PY
 }
 
+# The torchvision start-up hook (see the header). Compared by content, not by a stamp, on
+# every run: an edited hook module, or a hook file removed from site-packages, is
+# (re)installed without touching anything else.
+hook_src="$root/packages/mikasa-datasets/src/mikasa_datasets/torchvision_cpu.py"
+hook_pth_line="import _mikasa_torchvision_cpu; _mikasa_torchvision_cpu.install()"
+install_torchvision_hook() {
+  local site
+  site=$("$VENV/bin/python" -I -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+  if ! cmp -s "$hook_src" "$site/_mikasa_torchvision_cpu.py" ||
+    [ "$(cat "$site/_mikasa_torchvision_cpu.pth" 2>/dev/null)" != "$hook_pth_line" ]; then
+    cp "$hook_src" "$site/_mikasa_torchvision_cpu.py"
+    printf '%s\n' "$hook_pth_line" > "$site/_mikasa_torchvision_cpu.pth"
+    # its bytecode now, also where PYTHONDONTWRITEBYTECODE is set: every start loads it
+    "$VENV/bin/python" -I -m py_compile "$site/_mikasa_torchvision_cpu.py"
+    echo "[datasets-env] torchvision import hook installed: $site/_mikasa_torchvision_cpu.pth"
+  fi
+}
+
 if [ -x "$VENV/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$stamp_text" ]; then
   if ! editables_current; then
     "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets "${ENV_PACKAGES[@]}"
     printf '%s' "$editable_text" > "$editable_stamp"
   fi
+  install_torchvision_hook
   echo "[datasets-env] up to date: $VENV"
   exit 0
 fi
@@ -149,6 +176,7 @@ t1=$SECONDS
 # The light robot meshes, generated from the mani-skill wheel's own assets (no download).
 "$VENV/bin/python" -m mikasa_envs.setup_assets >/dev/null
 echo "[datasets-env] envs + lerobot policy/eval runtime: $((SECONDS - t1)) s"
+install_torchvision_hook
 printf '%s' "$editable_text" > "$editable_stamp"
 printf '%s' "$stamp_text" > "$stamp"
 echo "[datasets-env] done in $((SECONDS - t0)) s: $VENV/bin/mikasa-datasets --help"

@@ -155,7 +155,7 @@ def test_chunk_size_one_queries_every_step_and_success_is_a_latch():
 
     result, frames = run_episode(env, P(), 5)
     assert calls == [0, 1, 2, 3] and frames is None
-    assert result == EpisodeResult(True, 2.0, 4, 5)
+    assert result == EpisodeResult(True, 2.0, 4, 5, chunk_sizes=(1,))
 
 
 def test_reset_hook_receives_seed_and_random_policy_is_reproducible():

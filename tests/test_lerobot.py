@@ -26,11 +26,90 @@ NAME = "rotate_lenient_pos_vla_v0"
 MIN_PSNR_DB = 28.0
 
 if not IN_DATASETS_ENV:
-    from test_validate import run_suite_in_datasets_env
+    import subprocess
+    import sys
+
+    from test_validate import REPO, run_plain_in_datasets_env, run_suite_in_datasets_env
 
     def test_lerobot_suite_in_datasets_env() -> None:
         """Every test below, run inside `.venv-datasets`."""
         run_suite_in_datasets_env(__file__)
+
+    HOOK_SOURCE = REPO / "packages/mikasa-datasets/src/mikasa_datasets/torchvision_cpu.py"
+
+    def test_datasets_env_imports_torchvision_without_help(tmp_path: Path) -> None:
+        """`.venv-datasets` holds PyPI's CUDA torchvision beside the CPU torch; its start-up
+        hook (scripts/setup_datasets_envs.sh, mikasa_datasets.torchvision_cpu) makes a plain
+        ``import torchvision`` and lerobot's dataset module import in a fresh interpreter,
+        and imports nothing itself at start-up."""
+        start = run_plain_in_datasets_env(
+            "python",
+            "-c",
+            "import sys; print('torch' in sys.modules, 'torchvision' in sys.modules)",
+            cwd=tmp_path,
+        )
+        assert (start.returncode, start.stdout.strip()) == (0, "False False"), start.stderr
+        tv = run_plain_in_datasets_env(
+            "python",
+            "-c",
+            "import sys; import torchvision; print(torchvision.__version__)",
+            cwd=tmp_path,
+        )
+        assert tv.returncode == 0 and tv.stdout.startswith("0.28.0"), tv.stderr[-3000:]
+        ds = run_plain_in_datasets_env(
+            "python", "-c", "import lerobot.datasets.lerobot_dataset", cwd=tmp_path
+        )
+        assert ds.returncode == 0, ds.stderr[-3000:]
+        site = run_plain_in_datasets_env(
+            "python", "-c", "import _mikasa_torchvision_cpu as m; print(m.__file__)", cwd=tmp_path
+        )
+        assert Path(site.stdout.strip()).read_bytes() == HOOK_SOURCE.read_bytes()  # refreshed
+
+    def _fake_torchvision(root: Path, has_ops: bool) -> None:
+        """A stand-in for torchvision's import sequence: ``extension`` reports whether
+        ``_C`` loaded, then the package registers a fake kernel for ``torchvision::nms``."""
+        pkg = root / "torchvision"
+        pkg.mkdir()
+        (pkg / "extension.py").write_text(f"def _has_ops():\n    return {has_ops}\n")
+        (pkg / "__init__.py").write_text(
+            "import torch\n"
+            "from . import extension\n"
+            "torch.library.register_fake('torchvision::nms')(lambda dets, scores, t: dets)\n"
+        )
+
+    @pytest.mark.parametrize("has_ops", [False, True])
+    def test_torchvision_hook_acts_only_where_c_ops_are_missing(
+        tmp_path: Path, has_ops: bool
+    ) -> None:
+        """With ``_C`` missing the hook declares the schemas and the import succeeds; with
+        ``_C`` loaded it declares nothing (the fake package then fails as it would without
+        the hook, since nothing real defines the op here). Either way the module's own
+        loader is put back."""
+        _fake_torchvision(tmp_path, has_ops)
+        code = (
+            "import sys; sys.path.insert(0, sys.argv[1])\n"
+            "from mikasa_datasets import torchvision_cpu as t\n"
+            "t.install(); t.install()\n"
+            "assert sum(hasattr(f, '_mikasa_torchvision_cpu') for f in sys.meta_path) == 1\n"
+            "try:\n"
+            "    import torchvision\n"
+            "except RuntimeError as exc:\n"
+            "    print('error', 'torchvision::nms' in str(exc))\n"
+            "else:\n"
+            "    import torch\n"
+            "    print('ok', hasattr(torch.ops.torchvision, 'qnms'))\n"
+            "ext = sys.modules['torchvision.extension']\n"
+            "print(type(ext.__loader__).__name__, type(ext.__spec__.loader).__name__)\n"
+        )
+        proc = subprocess.run(
+            [sys.executable, "-c", code, str(tmp_path)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        first = "error True" if has_ops else "ok True"
+        assert proc.stdout.split("\n")[:2] == [first, "SourceFileLoader SourceFileLoader"]
 
 else:
     from mikasa_datasets import cli, lerobot_write, rlds
@@ -441,6 +520,22 @@ else:
         with pytest.raises(DatasetFormatError, match=re.escape(str(shard))):
             lr.convert_rlds_to_lerobot(r.path, tmp_path / "data_lerobot")
         assert list((tmp_path / "data_lerobot").iterdir()) == []
+
+    def test_cli_to_lerobot_from_auto(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        """Straight after ``mikasa-collect`` (NPZ only) ``to-lerobot`` needs no ``--from``:
+        the default ``auto`` reads NPZ and says so; once an RLDS copy exists it reads that."""
+        task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 12])
+        args = ["to-lerobot", "--root", str(tmp_path), "--no-videos"]
+        assert cli.main([*args, "--task", ENV_ID]) == 0
+        out = capsys.readouterr().out
+        assert f"to-lerobot {NAME}: from NPZ {task}\n" in out
+        assert f"to-lerobot {NAME}: 2 episodes, 22 frames" in out
+        assert len(load_episodes(tmp_path / "data_lerobot" / NAME)) == 2
+        rlds.convert_npz_to_rlds(task, tmp_path / "data_rlds")
+        assert cli.main([*args, "--all", "--lerobot-root", str(tmp_path / "b")]) == 0
+        out = capsys.readouterr().out
+        assert f"to-lerobot {NAME}: from RLDS {tmp_path / 'data_rlds' / NAME}\n" in out
+        assert len(load_episodes(tmp_path / "b" / NAME)) == 2
 
     def test_cli_to_lerobot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10, 12])

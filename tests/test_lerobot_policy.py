@@ -29,11 +29,35 @@ if not IN_LEROBOT_ENV:
     from mikasa_bench import cli
     from mikasa_bench.errors import BenchError
     from mikasa_bench.policies import is_lerobot_target, resolve_policy
-    from test_validate import run_suite_in_datasets_env
+    from test_validate import run_plain_in_datasets_env, run_suite_in_datasets_env
 
     def test_lerobot_policy_suite_in_datasets_env() -> None:
         """Every test of the lerobot branch below, run inside `.venv-datasets`."""
         run_suite_in_datasets_env(__file__)
+
+    @pytest.mark.parametrize(
+        "argv",
+        [
+            ["lerobot-train", "--help"],
+            ["lerobot-eval", "--help"],
+            [
+                "lerobot-eval",
+                "--env.discover_packages_path=mikasa_bench.lerobot_env",
+                "--env.type=mikasa",
+                "--help",
+            ],
+        ],
+        ids=["train", "eval", "eval-mikasa"],
+    )
+    def test_plain_lerobot_scripts_start_in_datasets_env(tmp_path: Path, argv: list[str]) -> None:
+        """lerobot's own console scripts in `.venv-datasets`, with no project wrapper: they
+        import torchvision (PyPI's CUDA build beside the CPU torch) through the environment's
+        start-up hook, and lerobot-eval finds the ``mikasa`` env type."""
+        proc = run_plain_in_datasets_env(*argv, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert proc.stdout.startswith(f"usage: {argv[0]} ")
+        if "--env.type=mikasa" in argv:
+            assert "--env.task" in proc.stdout and ",mikasa}" in proc.stdout
 
     def test_lerobot_target_errors_without_lerobot(tmp_path: Path, capsys) -> None:
         """Without lerobot: a missing directory or missing files are named; a complete

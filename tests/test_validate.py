@@ -64,6 +64,30 @@ def datasets_python() -> Path:
     return DATASETS_VENV / "bin" / "python"
 
 
+def run_plain_in_datasets_env(
+    executable: str, *args: str, cwd: Path, timeout: int = 600
+) -> subprocess.CompletedProcess[str]:
+    """``.venv-datasets/bin/<executable> ARGS`` as a user runs it: no project wrapper, a
+    clean environment (no PYTHONPATH or other PYTHON* variables, HOME = ``cwd``), outside
+    the checkout. Creates/refreshes the environment first."""
+    bin_dir = datasets_python().parent
+    env = {
+        "PATH": f"{bin_dir}:/usr/local/bin:/usr/bin:/bin",
+        "HOME": str(cwd),
+        "LANG": "C.UTF-8",
+        "TMPDIR": os.environ.get("TMPDIR", "/tmp"),
+        "OMP_NUM_THREADS": "1",
+    }
+    return subprocess.run(
+        [str(bin_dir / executable), *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
 def run_suite_in_datasets_env(test_file: str, timeout: int = 1500) -> None:
     """Run ``test_file`` with pytest inside `.venv-datasets`; fail with its output if red.
 

@@ -3,13 +3,18 @@
 Subcommands::
 
     mikasa-datasets to-rlds    (--task T ... | --all) [--root DIR] [--overwrite | --resume]
-    mikasa-datasets to-lerobot (--task T ... | --all) [--from rlds|npz] [--fps 10] ...
+    mikasa-datasets to-lerobot (--task T ... | --all) [--from auto|rlds|npz] [--fps 10] ...
     mikasa-datasets validate   PATH ... [--format npz|rlds|lerobot] [--quick]
 
 Paths follow datasets spec §2: ``<root>/data_npz/<name>``, ``<root>/data_rlds/<name>/1.0.0``,
 ``<root>/data_lerobot/<repo id>`` with ``--root`` defaulting to ``data_mikasa_robo``. A
 task is given by env id or dataset name (normalised with ``env_id_to_dataset_name``).
-``validate`` also accepts the RL release's episodes (``mikasa-rl-collect``:
+``to-lerobot`` reads RLDS or NPZ; ``--from auto`` (the default) takes, per ``--task``, the
+RLDS task directory when it holds a version directory and the NPZ one otherwise (so it runs
+straight after ``mikasa-collect``, which writes NPZ only); with ``--all``, the RLDS root
+if it holds any RLDS task directory, else the NPZ root. Each task's line says which source
+was read (``to-lerobot <name>: from NPZ <path>``). ``validate`` also accepts the RL
+release's episodes (``mikasa-rl-collect``:
 ``<path>/MIKASA-Robo/unbatched/<env_id>/`` or one of its files), told apart by their keys.
 
 Exit status: 0 success, 1 a conversion or validation failed (the message names the file),
@@ -86,9 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--from",
         dest="source",
-        choices=("rlds", "npz"),
-        default="rlds",
-        help="source format (default: %(default)s)",
+        choices=("auto", "rlds", "npz"),
+        default="auto",
+        help="source format; auto: per --task the RLDS task directory if it has a version "
+        "directory, else NPZ; with --all the RLDS root if it has RLDS task directories, "
+        "else the NPZ root (default: %(default)s)",
     )
     p.add_argument("--lerobot-root", help="LeRobot root (default: <root>/data_lerobot)")
     p.add_argument("--version", help="RLDS version directory X.Y.Z (default: the latest)")
@@ -141,6 +148,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _is_rlds_task_dir(d: Path) -> bool:
+    """A directory holding at least one ``X.Y.Z`` version directory."""
+    return d.is_dir() and any(c.is_dir() and c.name.count(".") == 2 for c in d.iterdir())
+
+
 def _task_dirs(args: argparse.Namespace, source_root: Path, kind: str) -> list[Path]:
     """Source task directories selected by ``--task``/``--all`` (dataset-name spelling)."""
     if args.task:
@@ -153,12 +165,49 @@ def _task_dirs(args: argparse.Namespace, source_root: Path, kind: str) -> list[P
             continue  # _batched staging, hidden staging outputs
         if kind == "npz" and not list_episode_files(d):
             continue
-        if kind == "rlds" and not any(c.is_dir() and c.name.count(".") == 2 for c in d.iterdir()):
+        if kind == "rlds" and not _is_rlds_task_dir(d):
             continue
         dirs.append(d)
     if not dirs:
         raise DatasetFormatError(source_root, f"no {kind} task directories")
     return dirs
+
+
+def _lerobot_sources(
+    args: argparse.Namespace, rlds_root: Path, npz_root: Path
+) -> list[tuple[str, Path]]:
+    """``(kind, task directory)`` per task to convert, ``kind`` "rlds" or "npz": as
+    ``--from`` says, or for ``auto`` per ``--task`` RLDS where its task directory has a
+    version directory, else NPZ; with ``--all`` the RLDS root if it has RLDS task
+    directories, else the NPZ root. Resolved for every task before anything is converted."""
+    if args.source != "auto":
+        root = rlds_root if args.source == "rlds" else npz_root
+        return [(args.source, d) for d in _task_dirs(args, root, args.source)]
+    if not args.task:
+        if rlds_root.is_dir() and any(
+            _is_rlds_task_dir(d) and not d.name.startswith(("_", ".")) for d in rlds_root.iterdir()
+        ):
+            return [("rlds", d) for d in _task_dirs(args, rlds_root, "rlds")]
+        if not npz_root.is_dir():
+            raise DatasetFormatError(
+                npz_root, f"NPZ root does not exist, and {rlds_root} holds no RLDS task directory"
+            )
+        return [("npz", d) for d in _task_dirs(args, npz_root, "npz")]
+    sources = []
+    for task in args.task:
+        rlds_dir = find_task_dir(rlds_root, task)
+        if _is_rlds_task_dir(rlds_dir):
+            sources.append(("rlds", rlds_dir))
+            continue
+        npz_dir = find_task_dir(npz_root, task)
+        if not npz_dir.is_dir():
+            raise DatasetFormatError(
+                npz_dir,
+                f"NPZ task directory does not exist, nor an RLDS one (with a version "
+                f"directory) at {rlds_dir}",
+            )
+        sources.append(("npz", npz_dir))
+    return sources
 
 
 def _report(command: str, task: str, result: object) -> None:
@@ -196,21 +245,18 @@ def _run_to_lerobot(args: argparse.Namespace) -> int:
 
     root = Path(args.root)
     lerobot_root = Path(args.lerobot_root) if args.lerobot_root else root / LEROBOT_DIRNAME
-    if args.source == "npz":
-        source_root, convert = (
-            (Path(args.npz_root) if args.npz_root else root / DATA_NPZ_DIRNAME),
-            lerobot.convert_npz_to_lerobot,
-        )
-    else:
-        source_root, convert = (
-            (Path(args.rlds_root) if args.rlds_root else root / RLDS_DIRNAME),
-            lerobot.convert_rlds_to_lerobot,
-        )
-    for src in _task_dirs(args, source_root, args.source):
-        if args.source == "rlds" and args.version:
+    npz_root = Path(args.npz_root) if args.npz_root else root / DATA_NPZ_DIRNAME
+    rlds_root = Path(args.rlds_root) if args.rlds_root else root / RLDS_DIRNAME
+    for kind, src in _lerobot_sources(args, rlds_root, npz_root):
+        name = src.name
+        if kind == "rlds" and args.version:
             if not (src / args.version).is_dir():
                 raise DatasetFormatError(src / args.version, "no such RLDS version directory")
             src = src / args.version
+        print(f"to-lerobot {name}: from {kind.upper()} {src}", flush=True)
+        convert = (
+            lerobot.convert_rlds_to_lerobot if kind == "rlds" else lerobot.convert_npz_to_lerobot
+        )
         result = convert(
             src,
             lerobot_root,

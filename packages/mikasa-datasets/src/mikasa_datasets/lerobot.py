@@ -35,9 +35,11 @@ why, and what the writer corrects after lerobot: :mod:`mikasa_datasets.lerobot_w
 Environment notes (see the package README): lerobot 0.4.x pins torch<2.11 but its
 dataset code runs on the repository's torch 2.13 CPU; PyPI's torchvision wheels are CUDA
 builds whose C++ ops cannot load next to a CPU torch, which breaks ``import torchvision``
-(needed by lerobot only for ``torchvision.transforms``). :func:`ensure_torchvision_importable`
-works around that. Hugging Face Hub access is switched off (``HF_HUB_OFFLINE=1``) before
-lerobot is imported: everything here is local.
+(needed by lerobot only for ``torchvision.transforms``).
+:mod:`mikasa_datasets.torchvision_cpu` works around that: in ``.venv-datasets`` as a
+start-up hook the setup script installs, elsewhere through
+:func:`ensure_torchvision_importable`. Hugging Face Hub access is switched off
+(``HF_HUB_OFFLINE=1``) before lerobot is imported: everything here is local.
 """
 
 from __future__ import annotations
@@ -47,13 +49,13 @@ import functools
 import io
 import json
 import os
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
+from mikasa_datasets import torchvision_cpu
 from mikasa_datasets.loaders import DatasetFormatError, require
 from mikasa_datasets.rlds import ConversionResult
 
@@ -123,43 +125,25 @@ DONE_KEY = "next.done"
 CAMERA_KEYS = (TOP_KEY, WRIST_KEY)
 IMAGE_SHAPE = (128, 128, 3)
 
+
 # --------------------------------------------------------------------------- lerobot import
-_TORCHVISION_OPS_LIB: Any = None  # keeps the placeholder op library alive
-
-
 def ensure_torchvision_importable() -> None:
     """Make ``import torchvision`` work with a CPU torch and PyPI's CUDA torchvision.
 
     torchvision's ``_C`` ops library links against libtorch_cuda, so with the CPU build of
     torch it fails to load (torchvision tolerates that), and then its import dies
     registering fake kernels for ``torchvision::nms``/``qnms``, ops that only ``_C``
-    defines. Declaring those two schemas first through torch's public ``torch.library``
-    lets the pure-Python parts (models, transforms: what lerobot's dataset and policy code
-    use) import; the detection ops stay unusable, and nothing here calls them. A
-    torchvision whose ``_C`` loads is left untouched; a missing one is left to the importer
-    to report. Also used by mikasa-bench's LeRobot policies (`mikasa_bench.lerobot_policy`).
+    defines. :mod:`mikasa_datasets.torchvision_cpu` declares those two schemas through
+    torch's public ``torch.library`` once ``_C`` has failed to load, which lets the
+    pure-Python parts (models, transforms: what lerobot's dataset and policy code use)
+    import; the detection ops stay unusable, and nothing here calls them. A torchvision
+    whose ``_C`` loads is left untouched; a missing one is left to the importer to report.
+    In ``.venv-datasets`` the same code already runs as a start-up hook (so plain
+    ``lerobot-train`` / ``lerobot-eval`` work there); this call makes it work in any other
+    environment too. Also used by mikasa-bench's LeRobot policies
+    (`mikasa_bench.lerobot_policy`).
     """
-    global _TORCHVISION_OPS_LIB
-    try:
-        import torchvision  # noqa: F401
-    except ImportError:
-        return
-    except RuntimeError as exc:
-        if "torchvision::" not in str(exc):
-            raise
-        for name in [m for m in sys.modules if m == "torchvision" or m.startswith("torchvision.")]:
-            del sys.modules[name]
-        import torch
-
-        if _TORCHVISION_OPS_LIB is None:
-            _TORCHVISION_OPS_LIB = torch.library.Library("torchvision", "DEF")
-            _TORCHVISION_OPS_LIB.define(
-                "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-            )
-            _TORCHVISION_OPS_LIB.define(
-                "qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"
-            )
-        import torchvision  # noqa: F401,F811
+    torchvision_cpu.ensure_importable()
 
 
 @functools.cache

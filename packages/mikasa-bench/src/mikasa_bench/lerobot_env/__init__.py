@@ -33,8 +33,7 @@ Usage (see packages/mikasa-bench/README.md, "LeRobot policies and lerobot-eval")
     lerobot-eval --env.discover_packages_path=mikasa_bench.lerobot_env --env.type=mikasa \\
         --env.task=RememberColor3-VLA-v0 --policy.path=DIR --eval.n_episodes=50 \\
         --eval.batch_size=1 --seed=4242424242
-    python -m mikasa_bench.lerobot_env ...   # the same, also where torchvision's ops do not
-                                             # load next to the installed torch (CPU torch)
+    python -m mikasa_bench.lerobot_env ...   # the same, after checking the policy's features
 """
 
 from __future__ import annotations
