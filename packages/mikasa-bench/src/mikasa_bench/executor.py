@@ -296,6 +296,7 @@ class _EpisodeWorker:
             except Exception:
                 pass
         self.env, self.env_key, self.policies, self.last_played = None, None, {}, None
+        self.scene_actions = {}
 
 
 def available_cores() -> int:

@@ -2,8 +2,9 @@
 
 The package ships the upstream-format manifest ``mikasa_robo_vla_envs.csv``
 (semicolon-delimited) generated from `mikasa_envs.manifest`; every function that reads it
-accepts ``csv_path`` to use another file. Registration checks (is the id known to
-Gymnasium yet?) live here too because only 27 of the 90 canonical ids are implemented.
+accepts ``csv_path`` to use another file. Registration checks (is the id registered with
+Gymnasium in this installation?) live here too: a manifest passed with ``csv_path`` may
+name ids that no installed package registers.
 """
 
 from __future__ import annotations
