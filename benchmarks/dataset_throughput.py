@@ -8,7 +8,7 @@ Run inside the conversion environment (scripts/setup_datasets_envs.sh)::
 Reports frames/s (wall clock, library imports excluded), CPU seconds (all threads) and
 CPU-ms per frame, the machine's load average around each run (this box is shared: a load
 above the core count inflates wall time), and the video PSNR of the LeRobot output against
-the NPZ frames. Targets (issue 4): >= 1,000 frames/s NPZ -> RLDS, >= 300 frames/s for the
+the NPZ frames. Targets: >= 1,000 frames/s NPZ -> RLDS, >= 300 frames/s for the
 LeRobot paths on the 2-core machine.
 
 Collection throughput (oracle episodes per minute, the whole plan projected) is

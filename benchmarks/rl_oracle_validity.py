@@ -1,4 +1,4 @@
-"""Validity of the 32 RL tasks: does each need memory? (issue 16 §1 for the RL release)
+"""Validity of the 32 RL tasks: does each need memory? (the validity check, for the RL release)
 
 Four policies over the canonical seeds: the scripted oracle
 (``mikasa_robo_rl.oracles.make_rl_oracle``: the VLA family oracle acting in

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The validity sweep of issue 16 §1: the oracle, the memoryless oracle, the seeded random
+# The validity sweep: the oracle, the memoryless oracle, the seeded random
 # policy and zero actions on every task (state observations, the canonical seeds), then
 # docs/VALIDITY.md (or $VALIDITY_OUT) from the four run directories.
 #
@@ -8,8 +8,8 @@
 # OUT (default results/validity) gets one run directory per policy; EPISODES defaults to 50
 # (the canonical count), WORKERS to the CPU count; TASKS="ID ID ..." limits the sweep to those
 # tasks (default: --split all); VALIDITY_UPDATE=docs/VALIDITY.json keeps that table's rows for the
-# other tasks (`mikasa-bench validity --update`); BENCH is the mikasa-bench to use. Interrupted (a machine lent for 10-minute
-# commands, kill -9): run the same command again; each policy's run resumes where it stopped.
+# other tasks (`mikasa-bench validity --update`); BENCH is the mikasa-bench to use. Interrupted (a time limit,
+# kill -9): run the same command again; each policy's run resumes where it stopped.
 # Cost: ~2 M env steps per policy over the 90 tasks (the oracle stops at its first success).
 # Measured: oracle 321 s and memoryless 491 s with 32 workers on a 32-core machine (both end
 # on a tail of long episodes); zero 2,627 s with 2 workers on a 2-core machine (774 steps/s);

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The lent GPU machine takes at most 64 MiB per call (tracked tree + carried paths), and
+# A GPU machine without network that takes at most 64 MiB per call (tracked tree + carried paths), and
 # .gpu/ (built by the workplace's gpu-carry.sh) is ~54 MiB, which with the tracked tree
 # (~10 MiB) leaves no room for a run's resume.pt. This packs .gpu/ smaller: the sapien wheel
 # travels as an xz tarball of its contents (28 MB instead of 39 MB), the rest as one xz tarball.

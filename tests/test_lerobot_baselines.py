@@ -1,4 +1,4 @@
-"""The LeRobot baseline driver (baselines/lerobot/run_baselines.py, issue 15 §3).
+"""The LeRobot baseline driver (baselines/lerobot/run_baselines.py).
 
 The end-to-end test needs lerobot 0.4.x next to the MIKASA envs: in the main environment
 this file contributes one test that runs it inside `.venv-datasets` (tests/test_validate.py's

@@ -1,4 +1,4 @@
-"""LeRobot policies in mikasa-bench (issue 15 §2): ``mikasa-bench run --policy lerobot:DIR``
+"""LeRobot policies in mikasa-bench: ``mikasa-bench run --policy lerobot:DIR``
 and ``lerobot-eval --env.type=mikasa`` (mikasa_bench.lerobot_policy, mikasa_bench.lerobot_env).
 
 Needs lerobot 0.4.x next to the MIKASA envs: in the main environment this file contributes

@@ -1,4 +1,4 @@
-"""The memoryless oracle (issue 16 §1): the same controllers with their memory of the answer
+"""The memoryless oracle: the same controllers with their memory of the answer
 wiped every step. It acts, it succeeds exactly when its guess is right (so at chance), it is
 deterministic per episode seed, and the bench runs it as ``--policy oracle-memoryless``."""
 

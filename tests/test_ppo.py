@@ -200,7 +200,7 @@ def _run_file_lines():
 
 @pytest.mark.parametrize(("trainer", "flags"), list(_run_file_lines()))
 def test_run_file_lines_parse(ppo, ppo_lstm, trainer, flags):
-    # A mistyped or renamed flag fails here rather than minutes into a call on a lent machine.
+    # A mistyped or renamed flag fails here rather than minutes into a time-limited GPU job.
     module = {"ppo_memtasks.py": ppo, "ppo_memtasks_lstm.py": ppo_lstm}[trainer]
     args = parse_args(module.Args, [*flags, "--time-limit", "60"])
     assert args.env_id and observation_mode(args)

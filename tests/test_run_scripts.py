@@ -1,4 +1,4 @@
-"""The shell scripts that chain PPO runs over lent machines: side_by_side.sh resumes each run
+"""The shell scripts that chain PPO runs over time-limited machines: side_by_side.sh resumes each run
 from its newest resume.pt and packs each call's log lines apart; merge_call.sh merges what a
 call returned into the run's directory here without losing the lines already there."""
 

@@ -1,4 +1,4 @@
-"""Save, restore and replay (issue 16 §3): ManiSkill's state API carries each task's own state.
+"""Save, restore and replay: ManiSkill's state API carries each task's own state.
 
 ``env.get_state_dict()`` / ``env.set_state_dict(state)`` must restore everything stepping reads,
 so that the steps after a restore repeat the steps after the save, in the same env or in

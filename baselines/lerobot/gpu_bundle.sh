@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The lerobot side of the lent GPU machine (offline; Python 3.12, torch 2.11 + torchvision
+# The lerobot side of a GPU machine without network (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
 #   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~91 MB)

@@ -222,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
         add(flag, type=kind, default=default, help=text, **kw)
 
     cpus = os.cpu_count() or 1
-    csv("--tasks", DEFAULT_TASKS, "comma-separated env ids (default: the six of issue 15)")
+    csv("--tasks", DEFAULT_TASKS, "comma-separated env ids (default: the six baseline tasks)")
     csv(
         "--policies",
         DEFAULT_SETTINGS,

@@ -115,7 +115,7 @@ class PPOArgs:
     extension: re-opens the exploration of a run whose action noise has collapsed; default: keep)"""
     time_limit: float | None = None
     """stop after the iteration that passes this many seconds since the trainer started (env workers' start
-    included, so that a lent machine's call can be sized), resume.pt saved (to chain time-limited jobs)"""
+    included, so that a time-limited job can be sized), resume.pt saved (to chain time-limited jobs)"""
 
 
 def observation_mode(args: PPOArgs) -> str:
@@ -394,8 +394,8 @@ class Run:
 
     def _adapt_to_new_units(self, agent: torch.nn.Module, optimizer: torch.optim.Optimizer, state: dict) -> None:
         """A run resumed at another ``--reward-scale``, ``--vf-coef`` or ``--reward-mode`` than the
-        resume ``state`` was saved with (recorded since 2026-11-27, 2026-11-29 and 2026-11-29's
-        sixth session; an older one counts as unchanged). Another reward scale: scale the critic's
+        resume ``state`` was saved with (recorded since 2026-11-27, 2026-11-29 and later on
+        2026-11-29; an older one counts as unchanged). Another reward scale: scale the critic's
         outputs to the new returns, or the first updates would fit values off by the ratio and
         their advantages would be noise. Another reward mode has no such ratio: the critic refits.
         Any of them: start the optimizer's moments afresh. They are all in the old units: the
@@ -541,7 +541,7 @@ def start_run(args: PPOArgs, script: str, whole_env_minibatches: bool = False) -
     torch.backends.cudnn.deterministic = args.torch_deterministic
     device = torch.device("cuda" if torch.cuda.is_available() and args.cuda else "cpu")
 
-    # Timed because starting many workers is a lent machine's cost per call (64+64 took minutes).
+    # Timed because starting many workers costs every time-limited job (64+64 took minutes).
     launched = time.time()
     envs, eval_envs = make_envs(args, mode, num_envs, device, save_dir)
     print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, {args.num_eval_envs} eval envs, "

@@ -1,6 +1,6 @@
 """Chance success rate per task: what a policy without memory can get by guessing.
 
-The validity check (issue 16 §1, ``mikasa-bench validity``) compares the memoryless oracle
+The validity check (``mikasa-bench validity``) compares the memoryless oracle
 and the random policy with this figure: a task where either does significantly better
 than chance shows its answer without memory (a leak).
 

@@ -1,4 +1,4 @@
-"""The validity table (issue 16 §1): does each task need memory?
+"""The validity table: does each task need memory?
 
 From result directories of the four reference policies (``oracle``, ``oracle-memoryless``,
 ``random``, ``zero``; any mix of run directories and directories of runs), per task: the

@@ -15,7 +15,7 @@ __version__ = "0.1.0"
 
 # Task family (manifest) -> oracle class.
 ORACLES: dict[str, type] = ALL_ORACLES
-# Task family -> the oracle's memoryless variant (issue 16 §1; `mikasa_oracles.scripted.Memoryless`).
+# Task family -> the oracle's memoryless variant (`mikasa_oracles.scripted.Memoryless`).
 MEMORYLESS_ORACLES: dict[str, type] = ALL_MEMORYLESS_ORACLES
 
 

@@ -37,7 +37,7 @@ class ScriptedOracle:
 
 
 class Memoryless:
-    """Mixin that turns a family oracle into its memoryless variant (issue 16 §1).
+    """Mixin that turns a family oracle into its memoryless variant (the validity check).
 
     Put it first in the bases: ``class MemorylessX(Memoryless, XOracle)``. Before every
     step it calls ``forget()``, which wipes whatever the oracle has remembered across steps
