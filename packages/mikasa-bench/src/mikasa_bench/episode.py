@@ -119,12 +119,15 @@ def first_value(x: Any) -> Any:
     return x
 
 
-def normalize_action_chunk(output: Any, action_shape: Sequence[int]) -> list[Any]:
+def normalize_action_chunk(
+    output: Any, action_shape: Sequence[int], step: int | None = None
+) -> list[Any]:
     """Split a policy output into a list of float32 torch actions of shape ``action_shape``.
 
     Accepted: ``A`` (one action), ``(K, *A)`` or ``(1, K, *A)`` as a torch tensor or numpy
     array (array-likes are converted). Anything else raises `PolicyOutputError` naming the
-    expected shapes; an empty chunk (``K == 0``) too.
+    expected shapes; an empty chunk (``K == 0``) and NaN or inf values too (naming ``step``,
+    the env step the chunk starts at, when given).
     """
     import torch
 
@@ -165,6 +168,9 @@ def normalize_action_chunk(output: Any, action_shape: Sequence[int]) -> list[Any
             f"policy.forward returned an empty action chunk (shape {shape}); expected K >= 1."
         )
     chunk = chunk.to(torch.float32)
+    if not bool(torch.isfinite(chunk).all()):
+        at = "" if step is None else f" at step {step}"
+        raise PolicyOutputError(f"policy.forward returned non-finite actions (NaN or inf){at}")
     return list(chunk.unbind(0))
 
 
@@ -202,7 +208,7 @@ def run_episode(
     see the episode's own global RNG states (`EpisodeRngs`) instead of the process's.
     ``fresh_scene``: the reset rebuilds the scene (``reconfigure``), as every
     `EPISODES_PER_SCENE`-th episode does (`starts_scene`). ``action_sink`` receives each
-    action (float32, shape of the action space) before it is stepped: `replay_actions`
+    action (float32, shape of the action space) before it is stepped: `RecordedActions`
     plays them again. Non-finite actions raise `PolicyOutputError` naming the step.
     """
     import torch
@@ -242,11 +248,7 @@ def run_episode(
         if not queue:
             with policy_rngs():
                 output = policy.forward(obs)
-            chunk = normalize_action_chunk(output, action_shape)
-            if not all(bool(torch.isfinite(a).all()) for a in chunk):
-                raise PolicyOutputError(
-                    f"policy.forward returned non-finite actions (NaN or inf) at step {n_steps}"
-                )
+            chunk = normalize_action_chunk(output, action_shape, step=n_steps)
             chunk_sizes.add(len(chunk))
             queue.extend(chunk)
         if action_sink is not None:
@@ -275,7 +277,7 @@ class RecordedActions:
     def __init__(self, actions: Sequence[Any]) -> None:
         import torch
 
-        self.actions = torch.stack(list(actions)) if len(actions) else torch.zeros(0)
+        self.actions = torch.stack(list(actions))
 
     def forward(self, obs: Any) -> Any:
         return self.actions

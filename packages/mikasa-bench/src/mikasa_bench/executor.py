@@ -150,8 +150,9 @@ class _EpisodeWorker:
         self.render: str | None = None
         self.last_played: tuple[Hashable, int] | None = None
         """(scene key, episode) of the last episode played on the env's current scene."""
-        self.scene_actions: dict[int, list[Any]] = {}
-        """The actions of each episode played on the env's current scene (`_rewind`)."""
+        self.recorded: tuple[Hashable, dict[int, list[Any]]] | None = None
+        """(scene key, episode -> its actions) of the episodes played on the env's current
+        scene: `_replay_scene_history` replays them without the policy."""
 
     def _env_for(self, job: EpisodeJob) -> Any:
         if self.env_key != job.env_key:
@@ -237,18 +238,18 @@ class _EpisodeWorker:
                     "(restart %d of %d)",
                     *(job.task.env_id, job.episode, job.seed, exc, restarts, allowed),
                 )
-                self._rewind(job, env)
+                self._replay_scene_history(job, env, policy, rewind=True)
 
     def _play(
         self, job: EpisodeJob, episode: int, env: Any, policy: Any, **kwargs: Any
     ) -> EpisodeResult:
         """Play episode ``episode`` of ``job``'s task (a fresh scene where `starts_scene`)
-        and keep its actions for `_rewind`."""
+        and record its actions (`_replay_scene_history`)."""
         from mikasa_envs.render_batcher import participating
 
         self.last_played = None  # until it has finished
-        if starts_scene(episode):
-            self.scene_actions = {}
+        if starts_scene(episode) or self.recorded is None or self.recorded[0] != job.scene_key:
+            self.recorded = (job.scene_key, {})
         actions: list[Any] = []
         # The episode (not the env build) takes part in shared render passes when this
         # process runs several workers (mikasa_envs.render_batcher); else a no-op.
@@ -262,30 +263,33 @@ class _EpisodeWorker:
                 action_sink=actions.append,
                 **kwargs,
             )
-        self.scene_actions[episode] = actions
+        self.recorded[1][episode] = actions
         self.last_played = (job.scene_key, episode)
         return result
 
-    def _rewind(self, job: EpisodeJob, env: Any) -> None:
-        """Bring the env's scene back to where ``job``'s episode starts after an
-        interrupted attempt: the scene is built again and the episodes before it replay
-        their recorded actions (no policy call), so the physics the episode meets is the
-        same as on its first attempt."""
-        recorded = dict(self.scene_actions)  # _play starts the dict afresh with the scene
-        for episode in range(scene_start(job.episode), job.episode):
-            replay = RecordedActions(recorded[episode])
-            self._play(job, episode, env, replay, reset_policy_hook=False)
-
-    def _replay_scene_history(self, job: EpisodeJob, env: Any, policy: Any) -> bool:
+    def _replay_scene_history(
+        self, job: EpisodeJob, env: Any, policy: Any, rewind: bool = False
+    ) -> bool:
         """Play (and discard) the episodes that precede ``job`` on its scene, unless the
-        env's scene just played them: the job's numbers then do not depend on which
-        episodes this worker ran before (the scheduler hands out a scene's episodes in
-        order to one worker, so this only replays after a resume or an error). Returns
-        whether it replayed."""
-        if starts_scene(job.episode) or self.last_played == (job.scene_key, job.episode - 1):
+        env's scene just played them (or ``rewind``: after an interrupted attempt of the
+        job, whose physics must be met again as on its first attempt): the job's numbers
+        then do not depend on which episodes this worker ran before (the scheduler hands
+        out a scene's episodes in order to one worker, so this only replays after a
+        resume, an error or an interruption). An episode this worker played on the scene
+        replays its recorded actions, no policy call; others are played with ``policy``.
+        Returns whether it replayed."""
+        if starts_scene(job.episode):
             return False
+        if not rewind and self.last_played == (job.scene_key, job.episode - 1):
+            return False
+        key, recorded = self.recorded or (None, {})
+        recorded = dict(recorded) if key == job.scene_key else {}  # _play starts it afresh
         for episode in range(scene_start(job.episode), job.episode):
-            self._play(job, episode, env, policy)
+            if episode in recorded:
+                replay = RecordedActions(recorded[episode])
+                self._play(job, episode, env, replay, reset_policy_hook=False)
+            else:
+                self._play(job, episode, env, policy)
         return True
 
     def close(self) -> None:
@@ -296,7 +300,7 @@ class _EpisodeWorker:
             except Exception:
                 pass
         self.env, self.env_key, self.policies, self.last_played = None, None, {}, None
-        self.scene_actions = {}
+        self.recorded = None
 
 
 def available_cores() -> int:

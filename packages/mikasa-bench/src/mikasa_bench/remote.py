@@ -118,15 +118,8 @@ class RemotePolicy:
         self._episode_seed: int | None = None
         self._step_index = 0
         self._reset_pending = False
-        self.chunk_sizes_seen: set[int] = set()
-        """The chunk lengths K of the replies received so far."""
         self._connect_with_retries()
-        self._declared_chunk_size = self._chunk_from_metadata()
-
-    @property
-    def chunk_size(self) -> int:
-        """The largest chunk K received so far (before any reply: the metadata's, else 1)."""
-        return max(self.chunk_sizes_seen, default=self._declared_chunk_size)
+        self.chunk_size = self._chunk_from_metadata()
 
     @property
     def max_episode_restarts(self) -> int:
@@ -203,7 +196,7 @@ class RemotePolicy:
 
     def _chunk_from_metadata(self) -> int:
         # openpi servers send no chunk_size: the replies' K is used as it comes, and the
-        # runner records the K it received (`chunk_size` once replies have come).
+        # runner records the K it actually received (`EpisodeResult.chunk_sizes`).
         k = self.metadata.get("chunk_size", 1)
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k <= 0:
             raise BenchError(
@@ -282,7 +275,6 @@ class RemotePolicy:
         self._reset_pending = False
         actions = self._check_reply(data, where)
         k = 1 if actions.shape == self.action_shape else actions.shape[-len(self.action_shape) - 1]
-        self.chunk_sizes_seen.add(int(k))
         self._step_index += int(k)
         return actions
 

@@ -72,6 +72,14 @@ REQUEST_KEYS: dict[str, str] = {
     "reset": "bool",
 }
 """What a request may hold: key -> type and shape (`check_request`)."""
+_INFO_TYPES: dict[str, tuple[type, ...]] = {
+    "prompt": (str,),
+    "env_id": (str, type(None)),
+    "episode_index": (int, np.integer),
+    "step_index": (int, np.integer),
+    "episode_seed": (int, np.integer, type(None)),
+    "reset": (bool, np.bool_),
+}
 DEFAULT_PORT = 8000  # openpi's default
 
 
@@ -252,14 +260,7 @@ def _value_problem(key: str, value: Any) -> str | None:
                 np.issubdtype(value.dtype, np.number) or value.dtype == np.bool_
             ) and value.ndim == 1
         return None if ok else kind
-    allowed: tuple[type, ...] = {
-        "prompt": (str,),
-        "env_id": (str, type(None)),
-        "episode_index": (int, np.integer),
-        "step_index": (int, np.integer),
-        "episode_seed": (int, np.integer, type(None)),
-        "reset": (bool, np.bool_),
-    }[key]
+    allowed = _INFO_TYPES[key]
     if isinstance(value, bool) and bool not in allowed:
         return kind
     return None if isinstance(value, allowed) else kind

@@ -134,6 +134,7 @@ def build_task_result(
     returns = [float(e.episode_return) for e in episodes]
     lengths = [int(e.n_steps) for e in episodes]
     n = len(successes)
+    chunk_sizes = {k for e in episodes for k in e.chunk_sizes}
     lo, hi = wilson_interval(sum(successes), n)
     settings = protocol_settings(config)
     out = {
@@ -150,9 +151,7 @@ def build_task_result(
         "control_mode": config.control_mode,
         "obs_mode": config.obs_mode,
         "wrapper_chain": config.wrapper_chain,
-        "action_chunk_size": max(
-            [int(action_chunk_size)] + [k for e in episodes for k in e.chunk_sizes]
-        ),
+        "action_chunk_size": max(chunk_sizes | {int(action_chunk_size)}),
         "model": dict(model or {}),
         "episode_lengths": lengths,
         "episode_seeds": [int(e.seed) for e in episodes],
@@ -167,7 +166,7 @@ def build_task_result(
         "policy_batch": config.policy_batch,
         "canonical": settings["canonical"],
         "wall_time_s": wall_time_s,
-        "action_chunk_size_varied": len({k for e in episodes for k in e.chunk_sizes}) > 1,
+        "action_chunk_size_varied": len(chunk_sizes) > 1,
         "episode_restarts": [int(r) for r in restarts] if restarts is not None else [0] * n,
     }
     if videos is not None:

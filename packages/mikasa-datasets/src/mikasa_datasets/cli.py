@@ -184,15 +184,10 @@ def _lerobot_sources(
         root = rlds_root if args.source == "rlds" else npz_root
         return [(args.source, d) for d in _task_dirs(args, root, args.source)]
     if not args.task:
-        if rlds_root.is_dir() and any(
-            _is_rlds_task_dir(d) and not d.name.startswith(("_", ".")) for d in rlds_root.iterdir()
-        ):
+        try:
             return [("rlds", d) for d in _task_dirs(args, rlds_root, "rlds")]
-        if not npz_root.is_dir():
-            raise DatasetFormatError(
-                npz_root, f"NPZ root does not exist, and {rlds_root} holds no RLDS task directory"
-            )
-        return [("npz", d) for d in _task_dirs(args, npz_root, "npz")]
+        except DatasetFormatError:  # no RLDS root, or no RLDS task directory in it
+            return [("npz", d) for d in _task_dirs(args, npz_root, "npz")]
     sources = []
     for task in args.task:
         rlds_dir = find_task_dir(rlds_root, task)
