@@ -139,19 +139,22 @@ def test_named_chains_match_spec():
     )
     assert mw.STEP_REWARD == mw.INTERCEPT == (mw.RenderStepInfoWrapper, mw.RenderRewardInfoWrapper)
     assert set(mw.OVERLAY_CHAINS) == {
-        "COLOR_MEMORY",
-        "SHAPE_MEMORY",
-        "SHAPE_COLOR_MEMORY",
-        "SHELL_GAME",
-        "INTERCEPT",
-        "ROTATE",
-        "MEMORY_CAPACITY",
-        "BATTERIES_CHECKER",
-        "BLINK_COUNT",
-        "TRACE_SHAPE",
-        "TIMED_TRANSFER",
-        "STEP_REWARD",
+        "color_memory",
+        "shape_memory",
+        "shape_color_memory",
+        "shell_game",
+        "intercept",
+        "rotate",
+        "memory_capacity",
+        "batteries_checker",
+        "blink_count",
+        "trace_shape",
+        "timed_transfer",
+        "step_reward",
+        "none",
     }
+    for name, chain in mw.OVERLAY_CHAINS.items():
+        assert chain == (getattr(mw, name.upper()) if name != "none" else ()), name
 
 
 def test_config_dataclass_defaults_and_frozen():
@@ -261,7 +264,7 @@ def test_chain_with_overlays_and_max_episode_steps_override():
 def test_include_overlays_defaults_to_false():
     env = FakeVLAEnv(num_envs=1)
     wrapped = mw.apply_mikasa_vla_wrappers(env)
-    assert not any(issubclass(c, ov._RenderOverlayWrapper) for c in _chain(wrapped))
+    assert not any(issubclass(c, ov.RenderOverlayWrapper) for c in _chain(wrapped))
 
 
 def test_chain_without_wrist_camera_has_three_channels():

@@ -25,11 +25,13 @@ that contains it. (Unrelated to the benchmark's start seed, which is the same nu
 # ----------------------------------------------------------------------------------------
 
 
-def _num_envs(env: gym.Env) -> int:
+def num_envs_of(env: gym.Env) -> int:
+    """The batch size B of the base env (``num_envs``; 1 if it has none)."""
     return int(getattr(env.unwrapped, "num_envs", 1) or 1)
 
 
-def _env_device(env: gym.Env) -> torch.device:
+def env_device(env: gym.Env) -> torch.device:
+    """The torch device of the base env (CPU if it has none or an unreadable one)."""
     dev = getattr(env.unwrapped, "device", None)
     try:
         return torch.device(dev) if dev is not None else torch.device("cpu")
@@ -37,13 +39,15 @@ def _env_device(env: gym.Env) -> torch.device:
         return torch.device("cpu")
 
 
-def _sentinel_space(num_envs: int) -> spaces.Box:
+def sentinel_space(num_envs: int) -> spaces.Box:
+    """The (num_envs, 1) float32 space of an entry filled with `MISSING_VALUE_SENTINEL`."""
     # A constant box: exactly the set of values the placeholder can take. The flatten
     # wrapper recognises it to drop the entry from its space as it drops it from the obs.
     return spaces.Box(MISSING_VALUE_SENTINEL, MISSING_VALUE_SENTINEL, (num_envs, 1), np.float32)
 
 
-def _is_sentinel_space(space: gym.Space | None) -> bool:
+def is_sentinel_space(space: gym.Space | None) -> bool:
+    """Whether `space` is a `sentinel_space` (an entry that only holds the placeholder)."""
     return (
         isinstance(space, spaces.Box)
         and space.dtype == np.float32
@@ -52,7 +56,7 @@ def _is_sentinel_space(space: gym.Space | None) -> bool:
     )
 
 
-def _box_for(shape: tuple[int, ...], dtype: Any) -> spaces.Box:
+def box_for(shape: tuple[int, ...], dtype: Any) -> spaces.Box:
     """An unbounded Box of the given shape/dtype (integer dtypes use their full range)."""
     dtype = np.dtype(dtype)
     if dtype == np.bool_:
@@ -63,7 +67,8 @@ def _box_for(shape: tuple[int, ...], dtype: Any) -> spaces.Box:
     return spaces.Box(-np.inf, np.inf, shape, dtype)
 
 
-def _torch_to_numpy_dtype(dtype: torch.dtype) -> np.dtype:
+def torch_to_numpy_dtype(dtype: torch.dtype) -> np.dtype:
+    """The numpy dtype that a torch tensor of `dtype` converts to."""
     return torch.empty((), dtype=dtype).numpy().dtype
 
 
@@ -78,23 +83,25 @@ def _unbatch_space(space: gym.Space) -> gym.Space:
     return space
 
 
-def _flat_dim(space: gym.Space) -> int:
+def flat_dim(space: gym.Space) -> int:
     """Per-env width of ManiSkill's ``flatten_state_dict`` applied to a batched space."""
     if isinstance(space, spaces.Dict):
-        return sum(_flat_dim(s) for s in space.spaces.values())
+        return sum(flat_dim(s) for s in space.spaces.values())
     if isinstance(space, spaces.Box):
         return int(np.prod(space.shape[1:])) if len(space.shape) > 1 else 1
     raise TypeError(f"cannot flatten observation space {space}")
 
 
-def _set_spaces(wrapper: gym.Wrapper, space: gym.Space) -> None:
+def set_observation_spaces(wrapper: gym.Wrapper, space: gym.Space) -> None:
+    """Set a wrapper's batched ``observation_space`` and unbatched ``single_observation_space``."""
     wrapper.observation_space = space
     # ManiSkillVectorEnv reads single_observation_space via get_wrapper_attr, which finds
     # this attribute on the outermost wrapper before the stale one of the base env.
     wrapper.single_observation_space = _unbatch_space(space)
 
 
-def _contains_sentinel(x: Any) -> bool:
+def contains_sentinel(x: Any) -> bool:
+    """Whether a tensor or array holds `MISSING_VALUE_SENTINEL` anywhere (other types: False)."""
     if isinstance(x, torch.Tensor):
         # Only dtypes that can represent the value are compared (comparing a uint8 tensor
         # with it would be meaningless); the placeholder itself is float32.
@@ -108,13 +115,15 @@ def _contains_sentinel(x: Any) -> bool:
     return False
 
 
-def _elapsed_from_info(info: Any) -> Any:
+def elapsed_from_info(info: Any) -> Any:
+    """``info["elapsed_steps"]``, or None if `info` is not a dict or lacks it."""
     if isinstance(info, dict):
         return info.get("elapsed_steps")
     return None
 
 
-def _as_step_tensor(steps: Any, device: torch.device | None = None) -> torch.Tensor:
+def as_step_tensor(steps: Any, device: torch.device | None = None) -> torch.Tensor:
+    """Step counts (tensor, array or number) as a 1-D tensor, moved to `device` if given."""
     t = steps if isinstance(steps, torch.Tensor) else torch.as_tensor(np.asarray(steps))
     if device is not None and t.device != device:
         t = t.to(device)

@@ -1,5 +1,5 @@
 """Overlay base class and generic overlays: the reward-overlay switch, the value-access
-helpers, `_RenderOverlayWrapper`, and the step / reward / reward-term overlays.
+helpers, `RenderOverlayWrapper`, and the step / reward / reward-term overlays.
 """
 
 from __future__ import annotations
@@ -35,15 +35,16 @@ def reward_overlay_disabled() -> bool:
 # ----------------------------------------------------------------------------------------
 
 
-def _to_numpy(value: Any) -> Any:
+def to_numpy(value: Any) -> Any:
+    """A torch tensor as a numpy array (detached, on the CPU); anything else as it is."""
     if isinstance(value, torch.Tensor):
         return value.detach().cpu().numpy()
     return value
 
 
-def _per_env(value: Any, i: int) -> Any:
+def per_env(value: Any, i: int) -> Any:
     """Env i's entry of a batched value; unbatched scalars are returned as they are."""
-    value = _to_numpy(value)
+    value = to_numpy(value)
     if value is None:
         return None
     if isinstance(value, (list, tuple)):
@@ -57,12 +58,12 @@ def _per_env(value: Any, i: int) -> Any:
     return value
 
 
-def _scalar(value: Any) -> float | None:
+def scalar(value: Any) -> float | None:
     """A single finite number from a value (first element of an array), or None."""
     if value is None:
         return None
     try:
-        arr = np.asarray(_to_numpy(value), dtype=np.float64).reshape(-1)
+        arr = np.asarray(to_numpy(value), dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         return None
     if not arr.size or not np.isfinite(arr[0]):
@@ -70,7 +71,7 @@ def _scalar(value: Any) -> float | None:
     return float(arr[0])
 
 
-def _lookup(table: Any, key: int) -> Any:
+def lookup(table: Any, key: int) -> Any:
     """``table[key]`` for dicts (int or str keys) and sequences; None if absent."""
     if table is None:
         return None
@@ -90,7 +91,7 @@ def _lookup(table: Any, key: int) -> Any:
 # ----------------------------------------------------------------------------------------
 
 
-class _RenderOverlayWrapper(gym.Wrapper):
+class RenderOverlayWrapper(gym.Wrapper):
     """Base class: remember info/reward/steps and draw on every rendered frame."""
 
     def __init__(self, env: gym.Env) -> None:
@@ -121,7 +122,7 @@ class _RenderOverlayWrapper(gym.Wrapper):
         value = self.last_info.get(name)
         if value is None:
             value = getattr(self.env.unwrapped, name, None)
-        return _per_env(value, i)
+        return per_env(value, i)
 
     def render(self):
         """Render through the inner env and draw this overlay on each env's frame."""
@@ -143,17 +144,17 @@ class _RenderOverlayWrapper(gym.Wrapper):
 # ----------------------------------------------------------------------------------------
 
 
-class RenderStepInfoWrapper(_RenderOverlayWrapper):
+class RenderStepInfoWrapper(RenderOverlayWrapper):
     """Draw ``Step: <elapsed_steps>`` at (10, 30)."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw the step counter of env i."""
-        steps = _scalar(_per_env(self.elapsed_steps, i))
+        steps = scalar(per_env(self.elapsed_steps, i))
         if steps is not None:
             draw_text(frame, f"Step: {int(steps)}", (10, 30), 1.0, WHITE, 2)
 
 
-class RenderRewardInfoWrapper(_RenderOverlayWrapper):
+class RenderRewardInfoWrapper(RenderOverlayWrapper):
     """Draw ``Reward: <r>`` (latest step reward, 3 decimals) at (10, 90).
 
     Draws nothing while ``MIKASA_DISABLE_REWARD_OVERLAY`` is 1/true/yes/y/on.
@@ -163,12 +164,12 @@ class RenderRewardInfoWrapper(_RenderOverlayWrapper):
         """Draw the latest reward of env i (0.000 before the first step)."""
         if reward_overlay_disabled():
             return
-        reward = 0.0 if self.last_reward is None else _scalar(_per_env(self.last_reward, i))
+        reward = 0.0 if self.last_reward is None else scalar(per_env(self.last_reward, i))
         if reward is not None:
             draw_text(frame, f"Reward: {reward:.3f}", (10, 90), 1.0, WHITE, 2)
 
 
-class DebugRewardWrapper(_RenderOverlayWrapper):
+class DebugRewardWrapper(RenderOverlayWrapper):
     """List every ``info["reward_dict"]`` entry (scale 0.5) from y = 170 down, 20 px apart."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
@@ -177,6 +178,6 @@ class DebugRewardWrapper(_RenderOverlayWrapper):
         if not isinstance(reward_dict, dict):
             return
         for row, (key, value) in enumerate(reward_dict.items()):
-            v = _scalar(_per_env(value, i))
+            v = scalar(per_env(value, i))
             text = f"{key}: {v:.3f}" if v is not None else f"{key}: {value}"
             draw_text(frame, text, (10, 170 + 20 * row), 0.5, WHITE, 1)

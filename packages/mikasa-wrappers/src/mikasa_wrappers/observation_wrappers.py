@@ -15,15 +15,15 @@ from gymnasium import spaces
 
 from ._wrapper_helpers import (
     MISSING_VALUE_SENTINEL,
-    _box_for,
-    _contains_sentinel,
-    _env_device,
-    _flat_dim,
-    _is_sentinel_space,
-    _num_envs,
-    _sentinel_space,
-    _set_spaces,
-    _torch_to_numpy_dtype,
+    box_for,
+    contains_sentinel,
+    env_device,
+    flat_dim,
+    is_sentinel_space,
+    num_envs_of,
+    sentinel_space,
+    set_observation_spaces,
+    torch_to_numpy_dtype,
 )
 
 __all__ = [
@@ -61,7 +61,7 @@ class StateOnlyTensorToDictWrapper(gym.ObservationWrapper):
     ) -> None:
         super().__init__(env)
         base_space = env.observation_space
-        n = _num_envs(env)
+        n = num_envs_of(env)
         entries: OrderedDict[str, gym.Space] = OrderedDict()
         if isinstance(base_space, spaces.Dict):
             entries.update(base_space.spaces)
@@ -72,20 +72,20 @@ class StateOnlyTensorToDictWrapper(gym.ObservationWrapper):
             entries[key] = (
                 given if given is not None else self._space_of(getattr(base, key, None), n)
             )
-        _set_spaces(self, spaces.Dict(entries))
+        set_observation_spaces(self, spaces.Dict(entries))
 
     @staticmethod
     def _space_of(value: Any, n: int) -> spaces.Box:
         if value is None:
-            return _sentinel_space(n)
+            return sentinel_space(n)
         if isinstance(value, torch.Tensor):
-            dtype = _torch_to_numpy_dtype(value.dtype)
+            dtype = torch_to_numpy_dtype(value.dtype)
             shape = tuple(value.shape)
         else:
             arr = np.asarray(value)
             dtype, shape = arr.dtype, arr.shape
         per_env = (1,) if len(shape) <= 1 else shape[1:]
-        return _box_for((n, *per_env), dtype)
+        return box_for((n, *per_env), dtype)
 
     @staticmethod
     def _sentinel(batch: int, device: torch.device) -> torch.Tensor:
@@ -120,7 +120,7 @@ class StateOnlyTensorToDictWrapper(gym.ObservationWrapper):
         if isinstance(ref, torch.Tensor):
             batch, device = int(ref.shape[0]), ref.device
         else:
-            batch, device = _num_envs(self.env), _env_device(self.env)
+            batch, device = num_envs_of(self.env), env_device(self.env)
         base = self.env.unwrapped
         obs["task_cue"] = self._entry(getattr(base, "task_cue", None), batch, device)
         obs["oracle_info"] = self._entry(getattr(base, "oracle_info", None), batch, device)
@@ -170,8 +170,8 @@ class FlattenRGBDObservationWrapper(gym.ObservationWrapper):
         from mani_skill.utils.common import flatten_state_dict
 
         self._flatten_state_dict = flatten_state_dict
-        self._device = _env_device(env)
-        _set_spaces(self, self._derive_space(env.observation_space))
+        self._device = env_device(env)
+        set_observation_spaces(self, self._derive_space(env.observation_space))
 
     @property
     def _image_key(self) -> str | None:
@@ -194,19 +194,19 @@ class FlattenRGBDObservationWrapper(gym.ObservationWrapper):
         oracle_space = entries.pop("oracle_info", None)
         sensor_space = entries.pop("sensor_data", None)
         entries.pop("sensor_param", None)
-        n = _num_envs(self.env)
+        n = num_envs_of(self.env)
         out: OrderedDict[str, gym.Space] = OrderedDict()
 
         proprio_space = None
         if self.include_joints:
             parts = [entries.pop(k) for k in ("extra", "agent") if k in entries]
-            dim = sum(_flat_dim(p) for p in parts)
+            dim = sum(flat_dim(p) for p in parts)
             proprio_space = spaces.Box(-np.inf, np.inf, (n, dim), np.float32)
         if self.include_state:
             if list(entries) == ["state"] and isinstance(entries["state"], spaces.Box):
                 out["state"] = entries["state"]
             else:
-                dim = sum(_flat_dim(s) for s in entries.values())
+                dim = sum(flat_dim(s) for s in entries.values())
                 out["state"] = spaces.Box(-np.inf, np.inf, (n, dim), np.float32)
         if proprio_space is not None:
             out["proprio"] = proprio_space
@@ -236,15 +236,11 @@ class FlattenRGBDObservationWrapper(gym.ObservationWrapper):
             if key == "rgb":
                 out[key] = spaces.Box(0, 255, (n, *hw, channels), np.uint8)
             else:
-                out[key] = _box_for((n, *hw, channels), dtype)
+                out[key] = box_for((n, *hw, channels), dtype)
 
-        if cue_space is not None and not _is_sentinel_space(cue_space):
+        if cue_space is not None and not is_sentinel_space(cue_space):
             out["task_cue"] = cue_space
-        if (
-            self.include_oracle
-            and oracle_space is not None
-            and not _is_sentinel_space(oracle_space)
-        ):
+        if self.include_oracle and oracle_space is not None and not is_sentinel_space(oracle_space):
             out["oracle_info"] = oracle_space
         return spaces.Dict(out)
 
@@ -286,9 +282,9 @@ class FlattenRGBDObservationWrapper(gym.ObservationWrapper):
                 images += [cam["depth"] for cam in sensor_data.values()]
             out[key] = images[0] if len(images) == 1 else _concat_last_dim(images)
 
-        if cue is not None and not _contains_sentinel(cue):
+        if cue is not None and not contains_sentinel(cue):
             out["task_cue"] = cue
-        if self.include_oracle and oracle is not None and not _contains_sentinel(oracle):
+        if self.include_oracle and oracle is not None and not contains_sentinel(oracle):
             out["oracle_info"] = oracle
         return out
 
@@ -356,7 +352,7 @@ class ConvertJointsToEEFXyzRpyGripperWrapper(gym.ObservationWrapper):
             entries = OrderedDict(space.spaces)
             lead = entries["proprio"].shape[:-1]
             entries["proprio"] = spaces.Box(-np.inf, np.inf, (*lead, 7), np.float32)
-            _set_spaces(self, spaces.Dict(entries))
+            set_observation_spaces(self, spaces.Dict(entries))
 
     def _qpos_len(self, dim: int) -> int:
         if dim < 7:

@@ -27,22 +27,18 @@ from ._drawing import (  # noqa: F401
     to_rgb255,
 )
 from .generic_overlays import (  # noqa: F401
-    _TRUTHY,
     DISABLE_REWARD_OVERLAY_ENV_VAR,
     DebugRewardWrapper,
+    RenderOverlayWrapper,
     RenderRewardInfoWrapper,
     RenderStepInfoWrapper,
-    _lookup,
-    _per_env,
-    _RenderOverlayWrapper,
-    _scalar,
-    _to_numpy,
+    lookup,
+    per_env,
     reward_overlay_disabled,
+    scalar,
+    to_numpy,
 )
 from .task_overlays import (  # noqa: F401
-    _CAPACITY_PALETTE,
-    _RGB_FALLBACK,
-    _TRACE_SHAPE_NAMES,
     CUP_NAMES,
     MemoryCapacityInfoWrapper,
     RememberColorInfoWrapper,
@@ -118,17 +114,19 @@ TIMED_TRANSFER = (
 STEP_REWARD = (RenderStepInfoWrapper, RenderRewardInfoWrapper)
 
 OVERLAY_CHAINS: dict[str, tuple[type[gym.Wrapper], ...]] = {
-    "COLOR_MEMORY": COLOR_MEMORY,
-    "SHAPE_MEMORY": SHAPE_MEMORY,
-    "SHAPE_COLOR_MEMORY": SHAPE_COLOR_MEMORY,
-    "SHELL_GAME": SHELL_GAME,
-    "INTERCEPT": INTERCEPT,
-    "ROTATE": ROTATE,
-    "MEMORY_CAPACITY": MEMORY_CAPACITY,
-    "BATTERIES_CHECKER": BATTERIES_CHECKER,
-    "BLINK_COUNT": BLINK_COUNT,
-    "TRACE_SHAPE": TRACE_SHAPE,
-    "TIMED_TRANSFER": TIMED_TRANSFER,
-    "STEP_REWARD": STEP_REWARD,
+    "color_memory": COLOR_MEMORY,
+    "shape_memory": SHAPE_MEMORY,
+    "shape_color_memory": SHAPE_COLOR_MEMORY,
+    "shell_game": SHELL_GAME,
+    "intercept": INTERCEPT,
+    "rotate": ROTATE,
+    "memory_capacity": MEMORY_CAPACITY,
+    "batteries_checker": BATTERIES_CHECKER,
+    "blink_count": BLINK_COUNT,
+    "trace_shape": TRACE_SHAPE,
+    "timed_transfer": TIMED_TRANSFER,
+    "step_reward": STEP_REWARD,
+    "none": (),
 }
-"""The named overlay chains of the per-task table, by name."""
+"""The named overlay chains by lowercase name (``"shell_game"`` is `SHELL_GAME`); ``"none"`` is
+the empty chain of a task without overlays."""

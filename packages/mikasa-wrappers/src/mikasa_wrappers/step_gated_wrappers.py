@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from ._drawing import frames_to_uint8, restore_batching
-from ._wrapper_helpers import _as_step_tensor, _elapsed_from_info
+from ._wrapper_helpers import as_step_tensor, elapsed_from_info
 
 __all__ = [
     "CurriculumPhaseNoopActionWrapper",
@@ -45,13 +45,13 @@ class _StepGatedActionWrapper(gym.ActionWrapper):
     def reset(self, **kwargs: Any):
         """Reset the env and remember ``info["elapsed_steps"]``."""
         obs, info = self.env.reset(**kwargs)
-        self.current_steps = _elapsed_from_info(info)
+        self.current_steps = elapsed_from_info(info)
         return obs, info
 
     def step(self, action: Any):
         """Step with the (possibly replaced) action and remember ``info["elapsed_steps"]``."""
         obs, reward, terminated, truncated, info = self.env.step(self.action(action))
-        self.current_steps = _elapsed_from_info(info)
+        self.current_steps = elapsed_from_info(info)
         return obs, reward, terminated, truncated, info
 
     def _frozen_mask(self) -> torch.Tensor | None:
@@ -100,7 +100,7 @@ class CurriculumPhaseNoopActionWrapper(_StepGatedActionWrapper):
         empty = getattr(base, "empty_steps_per_env", None)
         if empty is not None:
             limit = cue + torch.as_tensor(empty, device=cue.device)
-        steps = _as_step_tensor(self.current_steps, limit.device)
+        steps = as_step_tensor(self.current_steps, limit.device)
         # The per-env attributes may be longer than B (allocated for the max num_envs).
         return steps < limit.reshape(-1)[: steps.shape[0]]
 
@@ -139,7 +139,7 @@ class InitialZeroActionWrapper(_StepGatedActionWrapper):
     def _frozen_mask(self) -> torch.Tensor | None:
         if self.current_steps is None:
             return None
-        return _as_step_tensor(self.current_steps) < self.n_initial_steps
+        return as_step_tensor(self.current_steps) < self.n_initial_steps
 
 
 # ----------------------------------------------------------------------------------------
@@ -167,7 +167,7 @@ class CameraShutdownWrapper(gym.Wrapper):
         """Whether any env is past ``n_initial_steps`` (cameras are off)."""
         if self.current_steps is None:
             return False
-        return bool((_as_step_tensor(self.current_steps) > self.n_initial_steps).any())
+        return bool((as_step_tensor(self.current_steps) > self.n_initial_steps).any())
 
     def _observation(self, obs: Any) -> Any:
         if not self.shutdown_active or not isinstance(obs, dict):
@@ -187,13 +187,13 @@ class CameraShutdownWrapper(gym.Wrapper):
     def reset(self, **kwargs: Any):
         """Reset and remember ``elapsed_steps``."""
         obs, info = self.env.reset(**kwargs)
-        self.current_steps = _elapsed_from_info(info)
+        self.current_steps = elapsed_from_info(info)
         return self._observation(obs), info
 
     def step(self, action: Any):
         """Step, remember ``elapsed_steps`` and black out the cameras if past the limit."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self.current_steps = _elapsed_from_info(info)
+        self.current_steps = elapsed_from_info(info)
         return self._observation(obs), reward, terminated, truncated, info
 
     def _render_width(self) -> int | None:

@@ -12,7 +12,7 @@ import numpy as np
 from mikasa_envs.building_blocks.shapes import SHAPE_NAMES
 
 from ._drawing import BLACK, WHITE, draw_swatch, draw_text, text_size, to_rgb255
-from .generic_overlays import _lookup, _per_env, _RenderOverlayWrapper, _scalar, _to_numpy
+from .generic_overlays import RenderOverlayWrapper, lookup, per_env, scalar, to_numpy
 
 __all__ = [
     "RememberColorInfoWrapper",
@@ -49,7 +49,7 @@ _TRACE_SHAPE_NAMES = {0: "circle", 1: "square", 2: "triangle"}
 # ----------------------------------------------------------------------------------------
 
 
-class RememberColorInfoWrapper(_RenderOverlayWrapper):
+class RememberColorInfoWrapper(RenderOverlayWrapper):
     """Draw ``Target:`` and a 22 px swatch of ``color_dict[oracle_info]`` (white if unknown).
 
     Used for RememberColor and FindImposterColor (where it shows the imposter's colour).
@@ -57,22 +57,22 @@ class RememberColorInfoWrapper(_RenderOverlayWrapper):
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's target colour."""
-        key = _scalar(self._value("oracle_info", i))
+        key = scalar(self._value("oracle_info", i))
         if key is None:
             return
         color_dict = getattr(self.env.unwrapped, "color_dict", None)
-        fill = to_rgb255(_lookup(color_dict, int(key))) or WHITE
+        fill = to_rgb255(lookup(color_dict, int(key))) or WHITE
         draw_text(frame, "Target:", (10, 60), 1.0, WHITE, 2)
         width, _ = text_size("Target:", 1.0, 2)
         draw_swatch(frame, 10 + width + 10, 38, 22, fill, WHITE, 2)
 
 
-class RememberShapeInfoWrapper(_RenderOverlayWrapper):
+class RememberShapeInfoWrapper(RenderOverlayWrapper):
     """Draw ``Target: <shape name>`` (names by index, see ``SHAPE_NAMES``) at (10, 60)."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's target shape name."""
-        key = _scalar(self._value("oracle_info", i))
+        key = scalar(self._value("oracle_info", i))
         if key is None:
             return
         k = int(key)
@@ -80,7 +80,7 @@ class RememberShapeInfoWrapper(_RenderOverlayWrapper):
         draw_text(frame, f"Target: {name}", (10, 60), 1.0, WHITE, 2)
 
 
-class RememberShapeAndColorInfoWrapper(_RenderOverlayWrapper):
+class RememberShapeAndColorInfoWrapper(RenderOverlayWrapper):
     """Draw ``Target:``, a swatch of ``COLOR_PALETTE[color_id]`` and ``BASE_SHAPES[shape_id]``.
 
     Reads ``oracle_info[i] = [shape_id, color_id]``.
@@ -96,9 +96,9 @@ class RememberShapeAndColorInfoWrapper(_RenderOverlayWrapper):
             return
         shape_id, color_id = int(ids[0]), int(ids[1])
         base = self.env.unwrapped
-        fill = to_rgb255(_lookup(getattr(base, "COLOR_PALETTE", None), color_id))
+        fill = to_rgb255(lookup(getattr(base, "COLOR_PALETTE", None), color_id))
         fill = fill or _RGB_FALLBACK.get(color_id, WHITE)
-        name = _lookup(getattr(base, "BASE_SHAPES", None), shape_id)
+        name = lookup(getattr(base, "BASE_SHAPES", None), shape_id)
         name = str(name) if name is not None else "Unknown"
         draw_text(frame, "Target:", (10, 60), 1.0, WHITE, 2)
         width, _ = text_size("Target:", 1.0, 2)
@@ -112,7 +112,7 @@ class RememberShapeAndColorInfoWrapper(_RenderOverlayWrapper):
 # ----------------------------------------------------------------------------------------
 
 
-class ShellGameRenderCupInfoWrapper(_RenderOverlayWrapper):
+class ShellGameRenderCupInfoWrapper(RenderOverlayWrapper):
     """Draw ``Target: Left/Center/Right`` at (10, 60) from ``oracle_info``.
 
     Other scalar answers show ``Target: <n>``, vector answers ``Oracle: [...]``, and a
@@ -134,16 +134,16 @@ class ShellGameRenderCupInfoWrapper(_RenderOverlayWrapper):
         draw_text(frame, text, (10, 60), 1.0, WHITE, 2)
 
 
-class RotateRenderAngleInfoWrapper(_RenderOverlayWrapper):
+class RotateRenderAngleInfoWrapper(RenderOverlayWrapper):
     """Draw the target angle (``task_cue``) at (10, 60) and the current one
     (``relative_angle``) at (10, 120), in degrees with 2 decimals."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's target and current peg angles."""
-        target = _scalar(self._value("task_cue", i))
+        target = scalar(self._value("task_cue", i))
         if target is not None:
             draw_text(frame, f"Target : {np.degrees(target):.2f} deg", (10, 60), 1.0, WHITE, 2)
-        current = _scalar(self._value("relative_angle", i))
+        current = scalar(self._value("relative_angle", i))
         if current is not None:
             draw_text(frame, f"Current: {np.degrees(current):.2f} deg", (10, 120), 1.0, WHITE, 2)
 
@@ -153,7 +153,7 @@ class RotateRenderAngleInfoWrapper(_RenderOverlayWrapper):
 # ----------------------------------------------------------------------------------------
 
 
-class MemoryCapacityInfoWrapper(_RenderOverlayWrapper):
+class MemoryCapacityInfoWrapper(RenderOverlayWrapper):
     """Draw ``Target: `` and one 15 px swatch per target colour id in ``oracle_info``.
 
     Swatches sit 10 px apart at y 45-60; the outline is white once that colour's cube is
@@ -166,8 +166,8 @@ class MemoryCapacityInfoWrapper(_RenderOverlayWrapper):
             return False
         try:
             if isinstance(touched, dict):
-                return bool(_scalar(_per_env(_lookup(touched, color_id), i)))
-            row = _per_env(touched, i)
+                return bool(scalar(per_env(lookup(touched, color_id), i)))
+            row = per_env(touched, i)
             return bool(np.asarray(row).reshape(-1)[color_id])
         except (IndexError, TypeError, ValueError):
             return False
@@ -182,32 +182,32 @@ class MemoryCapacityInfoWrapper(_RenderOverlayWrapper):
         draw_text(frame, "Target: ", (10, 60), 1.0, WHITE, 2)
         x = 10 + text_size("Target: ", 1.0, 2)[0]
         for j, cid in enumerate(ids):
-            fill = to_rgb255(_lookup(color_dict, cid)) or _CAPACITY_PALETTE.get(cid, WHITE)
+            fill = to_rgb255(lookup(color_dict, cid)) or _CAPACITY_PALETTE.get(cid, WHITE)
             outline = WHITE if self._touched(cid, i) else BLACK
             draw_swatch(frame, x + j * (15 + 10), 45, 15, fill, outline, 2)
 
 
-class RenderWorkingBatteriesInfoWrapper(_RenderOverlayWrapper):
+class RenderWorkingBatteriesInfoWrapper(RenderOverlayWrapper):
     """Draw ``Working found: <found>/<target>`` at (10, 150), scale 0.8
     (``found_working_count`` / ``target_working_count``)."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's battery progress."""
-        found = _scalar(self._value("found_working_count", i))
-        target = _scalar(self._value("target_working_count", i))
+        found = scalar(self._value("found_working_count", i))
+        target = scalar(self._value("target_working_count", i))
         if found is None or target is None:
             return
         draw_text(frame, f"Working found: {int(found)}/{int(target)}", (10, 150), 0.8, WHITE, 2)
 
 
-class RenderPressProgressInfoWrapper(_RenderOverlayWrapper):
+class RenderPressProgressInfoWrapper(RenderOverlayWrapper):
     """Draw ``Press raw/conf: <raw>/<confirmed>/<target>`` at (10, 120), scale 0.8
     (``raw_press_count`` / ``press_count`` / ``target_blinks``)."""
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's button-press progress."""
         values = [
-            _scalar(self._value(name, i))
+            scalar(self._value(name, i))
             for name in ("raw_press_count", "press_count", "target_blinks")
         ]
         if any(v is None for v in values):
@@ -216,7 +216,7 @@ class RenderPressProgressInfoWrapper(_RenderOverlayWrapper):
         draw_text(frame, f"Press raw/conf: {raw}/{conf}/{target}", (10, 120), 0.8, WHITE, 2)
 
 
-class RenderTraceShapeDebugWrapper(_RenderOverlayWrapper):
+class RenderTraceShapeDebugWrapper(RenderOverlayWrapper):
     """Draw a 160 px translucent minimap of the trace task (top-left, from y = 130).
 
     Shows the reference waypoints, the green cube's trail, the checkpoints (green visited,
@@ -234,7 +234,7 @@ class RenderTraceShapeDebugWrapper(_RenderOverlayWrapper):
     def _record_trail(self) -> None:
         cube = getattr(self.env.unwrapped, "green_cube", None)
         try:
-            xy = _to_numpy(cube.pose.p)[:, :2]
+            xy = to_numpy(cube.pose.p)[:, :2]
         except AttributeError:
             return
         for i, (x, y) in enumerate(np.asarray(xy, dtype=np.float64)):
@@ -256,12 +256,12 @@ class RenderTraceShapeDebugWrapper(_RenderOverlayWrapper):
         return out
 
     def _active(self, i: int) -> int | None:
-        active = _scalar(self._value("active_shape_idx", i))
+        active = scalar(self._value("active_shape_idx", i))
         return int(active) if active is not None else None
 
     def _element(self, value: Any, i: int, per_element_ndim: int) -> np.ndarray | None:
         """Env i's array for the drawn element (the active one for sequences)."""
-        row = _per_env(value, i)
+        row = per_env(value, i)
         if row is None:
             return None
         arr = np.asarray(row)
@@ -275,15 +275,15 @@ class RenderTraceShapeDebugWrapper(_RenderOverlayWrapper):
             ("demo_mask", "DEMO"),
             ("pre_demo_mask", "PRE-DEMO"),
         ):
-            v = _scalar(_per_env(self.last_info.get(key), i))
+            v = scalar(per_env(self.last_info.get(key), i))
             if v:
                 return label
         return None
 
     def _shape_name(self, i: int) -> str | None:
-        sid = _scalar(self._value("shape_type", i))
+        sid = scalar(self._value("shape_type", i))
         if sid is None:
-            seq = _per_env(getattr(self.env.unwrapped, "shape_sequence", None), i)
+            seq = per_env(getattr(self.env.unwrapped, "shape_sequence", None), i)
             if seq is not None:
                 seq = np.asarray(seq).reshape(-1)
                 idx = self._active(i) or 0
@@ -347,14 +347,14 @@ class RenderTraceShapeDebugWrapper(_RenderOverlayWrapper):
         closed = self.last_info.get(
             "is_contour_closed", self.last_info.get("is_active_contour_closed")
         )
-        closed = _scalar(_per_env(closed, i))
+        closed = scalar(per_env(closed, i))
         if closed is not None:
             lines.append(f"Closed: {'YES' if closed else 'NO'}")
         for row, text in enumerate(lines):
             draw_text(frame, text, (x0, y0 + size + 18 + 20 * row), 0.5, WHITE, 1)
 
 
-class RenderTimedTransferInfoWrapper(_RenderOverlayWrapper):
+class RenderTimedTransferInfoWrapper(RenderOverlayWrapper):
     """Draw the TimedTransfer timer near the right edge (x = width - 260).
 
     Lines: ``T-<steps left>`` to the target step (signal + delay), the phase
@@ -364,16 +364,16 @@ class RenderTimedTransferInfoWrapper(_RenderOverlayWrapper):
     def _delay(self, i: int) -> float | None:
         delay = getattr(self.env.unwrapped, "DELAY_STEPS", None)
         if delay is None:
-            return _scalar(self._value("oracle_info", i))
-        return _scalar(_per_env(delay, i))
+            return scalar(self._value("oracle_info", i))
+        return scalar(per_env(delay, i))
 
     def draw(self, frame: np.ndarray, i: int) -> None:
         """Draw env i's timing state."""
         x = frame.shape[1] - 260
-        e = _scalar(_per_env(self.elapsed_steps, i))
-        signal = _scalar(self._value("signal_step", i))
-        start = _scalar(self._value("window_start", i))
-        end = _scalar(self._value("window_end", i))
+        e = scalar(per_env(self.elapsed_steps, i))
+        signal = scalar(self._value("signal_step", i))
+        start = scalar(self._value("window_start", i))
+        end = scalar(self._value("window_end", i))
         delay = self._delay(i)
         lines: list[tuple[str, tuple[int, int, int]]] = []
         if e is not None and signal is not None and delay is not None:
@@ -391,7 +391,7 @@ class RenderTimedTransferInfoWrapper(_RenderOverlayWrapper):
         if start is not None and end is not None:
             d = f" d={int(delay)}" if delay is not None else ""
             lines.append((f"[{int(start)},{int(end)}]{d}", WHITE))
-        on_red = _scalar(_per_env(self.last_info.get("cube_on_red"), i))
+        on_red = scalar(per_env(self.last_info.get("cube_on_red"), i))
         if on_red is not None:
             lines.append(("ON RED", (255, 80, 80)) if on_red else ("not on red", WHITE))
         for row, (text, color) in enumerate(lines):

@@ -9,7 +9,7 @@ that ManiSkill's vector wrapper sees the true space.
 
 The code lives in `observation_wrappers` (dict / flatten / proprio conversion),
 `step_gated_wrappers` (curriculum and initial no-op actions, camera shutdown) and
-`_wrapper_helpers`; this module re-exports all of it.
+`_wrapper_helpers`; this module re-exports their public names.
 """
 
 from __future__ import annotations
@@ -17,35 +17,28 @@ from __future__ import annotations
 from ._drawing import frames_to_uint8, restore_batching  # noqa: F401
 from ._wrapper_helpers import (  # noqa: F401
     MISSING_VALUE_SENTINEL,
-    _as_step_tensor,
-    _box_for,
-    _contains_sentinel,
-    _elapsed_from_info,
-    _env_device,
-    _flat_dim,
-    _is_sentinel_space,
-    _num_envs,
-    _sentinel_space,
-    _set_spaces,
-    _torch_to_numpy_dtype,
-    _unbatch_space,
+    as_step_tensor,
+    box_for,
+    contains_sentinel,
+    elapsed_from_info,
+    env_device,
+    flat_dim,
+    is_sentinel_space,
+    num_envs_of,
+    sentinel_space,
+    set_observation_spaces,
+    torch_to_numpy_dtype,
 )
-from .observation_wrappers import (  # noqa: F401
+from .observation_wrappers import (
     ConvertJointsToEEFXyzRpyGripperWrapper,
     FlattenRGBDObservationWrapper,
     StateOnlyTensorToDictWrapper,
-    _concat_last_dim,
-    _quat_wxyz_to_rpy_numpy,
-    _quat_wxyz_to_rpy_torch,
 )
-from .step_gated_wrappers import (  # noqa: F401
-    _FINGER_CENTER,
-    _FINGER_HALF_RANGE,
+from .step_gated_wrappers import (
     CameraShutdownWrapper,
     CurriculumPhaseNoopActionWrapper,
     CurriculumPhaseNoopActionWrapperPdJointPos,
     InitialZeroActionWrapper,
-    _StepGatedActionWrapper,
 )
 
 __all__ = [
