@@ -1,17 +1,17 @@
 """The MIKASA-Robo-VLA task manifest: the 90 canonical tasks plus registered extra variants.
 
-The canonical rows are the published benchmark's manifest (``data/tasks.csv``); extra
-variants (``data/extra_tasks.csv``) are registered environments that are not part of any
-benchmark split. The manifest is plain data: it does not import the simulator.
+Each family's env module (``mikasa_envs/tasks/<family>.py``) registers its ids with their
+manifest rows (`mikasa_envs.registration.register_task`); this module lists them. Canonical
+rows (those with a split) are the published benchmark's manifest, in its order; extra
+variants are registered environments outside every benchmark split. Task modules of other
+installed packages (the ``mikasa_envs.tasks`` entry-point group) are listed too.
 """
 
 from __future__ import annotations
 
-import csv
 import difflib
-from dataclasses import dataclass
-from functools import cache
-from importlib import resources
+
+from mikasa_envs.family import TaskSpec, declared_tasks, find_task
 
 SPLITS: tuple[str, ...] = ("short", "medium", "long")
 MEMORY_TYPES: tuple[str, ...] = (
@@ -47,48 +47,10 @@ SHELL_GAME_FAMILIES: tuple[str, ...] = (
 """The six shell-game families (``tasks/_shell_game.py``): act on one of three mugs."""
 
 
-@dataclass(frozen=True)
-class TaskSpec:
-    """One manifest row.
+def _all_tasks() -> list[TaskSpec]:
+    import mikasa_envs.tasks  # noqa: F401  (registers the built-in families and plugins)
 
-    ``split`` and ``data_source`` are ``None`` for non-canonical variants.
-    """
-
-    env_id: str
-    family: str
-    split: str | None
-    memory_type: str
-    max_episode_steps: int
-    data_source: str | None
-    language_instruction: str
-    canonical: bool
-
-
-def _read(filename: str, canonical: bool) -> list[TaskSpec]:
-    text = resources.files("mikasa_envs").joinpath("data", filename).read_text(encoding="utf-8")
-    return [
-        TaskSpec(
-            env_id=row["env_id"],
-            family=row["family"],
-            split=row["split"] or None,
-            memory_type=row["memory_type"],
-            max_episode_steps=int(row["max_episode_steps"]),
-            data_source=row["data_source"] or None,
-            language_instruction=row["language_instruction"],
-            canonical=canonical,
-        )
-        for row in csv.DictReader(text.splitlines())
-    ]
-
-
-@cache
-def _all_tasks() -> tuple[TaskSpec, ...]:
-    return tuple(_read("tasks.csv", True) + _read("extra_tasks.csv", False))
-
-
-@cache
-def _by_id() -> dict[str, TaskSpec]:
-    return {t.env_id: t for t in _all_tasks()}
+    return declared_tasks()
 
 
 def _check_choice(name: str, value: str, accepted: tuple[str, ...]) -> None:
@@ -141,7 +103,7 @@ def canonical_env_ids() -> tuple[str, ...]:
 
 def unknown_env_id_message(env_id: str, known: list[str] | tuple[str, ...] | None = None) -> str:
     """An error message for an unknown env id that suggests the closest known ids."""
-    known = list(known if known is not None else _by_id())
+    known = list(known if known is not None else (t.env_id for t in _all_tasks()))
     close = difflib.get_close_matches(env_id, known, n=3, cutoff=0.6)
     hint = f" Did you mean: {', '.join(close)}?" if close else ""
     return (
@@ -159,7 +121,10 @@ class UnknownEnvIdError(KeyError, ValueError):
 
 def get_task(env_id: str) -> TaskSpec:
     """The manifest row of ``env_id``; ``UnknownEnvIdError`` with close matches if unknown."""
-    try:
-        return _by_id()[env_id]
-    except KeyError:
-        raise UnknownEnvIdError(unknown_env_id_message(env_id)) from None
+    spec = find_task(env_id)
+    if spec is None:
+        _all_tasks()  # the id may belong to a family not imported yet
+        spec = find_task(env_id)
+    if spec is None:
+        raise UnknownEnvIdError(unknown_env_id_message(env_id))
+    return spec

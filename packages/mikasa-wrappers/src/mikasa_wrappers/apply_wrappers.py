@@ -10,7 +10,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium import spaces
-from mikasa_envs.manifest import list_tasks
+from mikasa_envs.family import TaskSpec, get_family
+from mikasa_envs.manifest import get_task, list_tasks
 
 from . import overlays as ov
 from .wrappers import (
@@ -27,6 +28,7 @@ __all__ = [
     "apply_mikasa_vla_wrappers",
     "apply_mikasa_vla_state_wrappers",
     "apply_chain_head",
+    "family_wrapper_config",
     "REQUIRED_OBS_MODE",
 ]
 
@@ -49,74 +51,40 @@ class VLAWrapperConfig:
     expected_control_mode: str | None = None
 
 
-# Table order of the reference (wrappers.md §5): (family, which ids, overlay chain,
-# curriculum for these ids). "short" = ids without "-Long-", "long" = with, "all" = both.
-# The curriculum wrapper is on exactly for the short shell games and the short selection
-# tasks, whose short training data was collected with frozen cue/empty phases.
-_FAMILY_TABLE: tuple[tuple[str, str, tuple[type[gym.Wrapper], ...], bool], ...] = (
-    ("shell_game_touch", "all", ov.SHELL_GAME, True),
-    ("shell_game_push", "all", ov.SHELL_GAME, True),
-    ("shell_game_shuffle_touch", "short", ov.SHELL_GAME, True),
-    ("shell_game_shuffle_color_lamp_touch", "short", ov.SHELL_GAME, True),
-    ("shell_game_color_lamp_touch", "all", ov.SHELL_GAME, True),
-    ("shell_game_shuffle_touch", "long", ov.SHELL_GAME, False),
-    ("shell_game_shuffle_color_lamp_touch", "long", ov.SHELL_GAME, False),
-    ("intercept", "all", ov.INTERCEPT, False),
-    ("intercept_grab", "all", ov.INTERCEPT, False),
-    ("rotate_lenient", "all", ov.ROTATE, False),
-    ("rotate_strict", "all", ov.ROTATE, False),
-    ("take_it_back", "all", ov.INTERCEPT, False),
-    ("remember_color", "short", ov.COLOR_MEMORY, True),
-    ("remember_color", "long", ov.COLOR_MEMORY, False),
-    ("remember_shape", "short", ov.SHAPE_MEMORY, True),
-    ("remember_shape", "long", ov.SHAPE_MEMORY, False),
-    ("remember_shape_and_color", "short", ov.SHAPE_COLOR_MEMORY, True),
-    ("remember_shape_and_color", "long", ov.SHAPE_COLOR_MEMORY, False),
-    ("find_imposter_color", "all", ov.COLOR_MEMORY, True),
-    ("find_imposter_shape", "all", ov.SHAPE_MEMORY, True),
-    ("find_imposter_shape_and_color", "all", ov.SHAPE_COLOR_MEMORY, True),
-    ("bunch_of_colors", "short", ov.MEMORY_CAPACITY, False),
-    ("bunch_of_colors", "long", ov.MEMORY_CAPACITY, False),
-    ("seq_of_colors", "short", ov.MEMORY_CAPACITY, False),
-    ("seq_of_colors", "long", ov.MEMORY_CAPACITY, False),
-    ("chain_of_colors", "short", ov.MEMORY_CAPACITY, False),
-    ("chain_of_colors", "long", ov.MEMORY_CAPACITY, False),
-    ("batteries_checker_easy", "all", ov.BATTERIES_CHECKER, False),
-    ("batteries_checker_hard", "all", ov.BATTERIES_CHECKER, False),
-    ("blink_count_button_press", "short", ov.BLINK_COUNT, False),
-    ("blink_count_button_press", "long", ov.BLINK_COUNT, False),
-    ("trace_shape", "all", ov.TRACE_SHAPE, False),
-    ("trace_shape_seq", "all", ov.TRACE_SHAPE, False),
-    ("timed_transfer", "short", ov.TIMED_TRANSFER, False),
-    ("timed_transfer", "long", ov.TIMED_TRANSFER, False),
-    ("gather_and_recall", "all", ov.STEP_REWARD, False),
-)
-
-
 def _is_long(env_id: str) -> bool:
     return "-Long-" in env_id
 
 
+def family_wrapper_config(env_id: str) -> VLAWrapperConfig:
+    """The wrapper configuration of ``env_id`` from its family's declaration
+    (`mikasa_envs.family.TaskFamily`): its overlay chain and, for its ids without
+    ``-Long-``, the curriculum wrapper if the family freezes the robot during the cue."""
+    family = get_family(get_task(env_id).family)
+    if family.overlays not in ov.OVERLAY_CHAINS:
+        raise ValueError(
+            f"family {family.name!r} names overlay chain {family.overlays!r}; accepted values: "
+            f"{', '.join(ov.OVERLAY_CHAINS)}"
+        )
+    curriculum = family.frozen_cue_on_short_ids and not _is_long(env_id)
+    return VLAWrapperConfig(
+        overlays=ov.OVERLAY_CHAINS[family.overlays],
+        curriculum_wrapper=CurriculumPhaseNoopActionWrapper if curriculum else None,
+    )
+
+
+def _table_position(task: TaskSpec) -> float:
+    """Where ``task`` stands in the reference's wrapper table: by its family's rank for
+    short or ``-Long-`` ids, then in manifest order; families outside the table last."""
+    rank = get_family(task.family).wrapper_table_rank
+    if rank is None:
+        return float("inf")
+    return rank[1] if _is_long(task.env_id) else rank[0]
+
+
 def _build_configs() -> dict[str, VLAWrapperConfig]:
-    configs: dict[str, VLAWrapperConfig] = {}
-    for family, which, chain, curriculum in _FAMILY_TABLE:
-        for task in list_tasks(family=family):
-            if (which == "short" and _is_long(task.env_id)) or (
-                which == "long" and not _is_long(task.env_id)
-            ):
-                continue
-            if task.env_id in configs:
-                raise RuntimeError(f"{task.env_id} is listed twice in the wrapper table")
-            # The curriculum is never used for -Long- ids, whatever the family row says.
-            use_curriculum = curriculum and not _is_long(task.env_id)
-            configs[task.env_id] = VLAWrapperConfig(
-                overlays=chain,
-                curriculum_wrapper=CurriculumPhaseNoopActionWrapper if use_curriculum else None,
-            )
-    missing = [t.env_id for t in list_tasks() if t.env_id not in configs]
-    if missing:
-        raise RuntimeError(f"canonical tasks without a wrapper configuration: {missing}")
-    return configs
+    # sorted() is stable: within one rank the ids keep their manifest order.
+    tasks = sorted(list_tasks(), key=_table_position)
+    return {task.env_id: family_wrapper_config(task.env_id) for task in tasks}
 
 
 VLA_WRAPPER_CONFIGS: dict[str, VLAWrapperConfig] = _build_configs()

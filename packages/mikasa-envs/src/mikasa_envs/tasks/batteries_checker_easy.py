@@ -5,8 +5,16 @@ from __future__ import annotations
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks.batteries_checker_hard import BatteriesCheckerHardVLABaseEnv
+
+FAMILY = TaskFamily(
+    "batteries_checker_easy",
+    overlays="batteries_checker",
+    wrapper_table_rank=(27, 27),
+)
+
 
 
 class BatteriesCheckerEasyVLABaseEnv(BatteriesCheckerHardVLABaseEnv):
@@ -44,7 +52,8 @@ class BatteriesCheckerEasyVLABaseEnv(BatteriesCheckerHardVLABaseEnv):
         return pos
 
 
-@register_task("BatteriesCheckerEasy-3-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerEasy-3-VLA-v0", number=44, split="medium", data_source="MP",
+               memory_type="Checklist", max_episode_steps=540)
 class BatteriesCheckerEasy3VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     """3 batteries, 1 working."""
 
@@ -52,7 +61,8 @@ class BatteriesCheckerEasy3VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     WORKING_BATTERIES = 1
 
 
-@register_task("BatteriesCheckerEasy-6-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerEasy-6-VLA-v0", number=45, split="long", data_source="MP",
+               memory_type="Checklist", max_episode_steps=1080)
 class BatteriesCheckerEasy6VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     """6 batteries, 3 working."""
 
@@ -60,7 +70,8 @@ class BatteriesCheckerEasy6VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     WORKING_BATTERIES = 3
 
 
-@register_task("BatteriesCheckerEasy-9-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerEasy-9-VLA-v0", number=91, memory_type="Checklist",
+               max_episode_steps=1620, )
 class BatteriesCheckerEasy9VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     """9 batteries, 5 working (registered, not canonical)."""
 
@@ -68,7 +79,8 @@ class BatteriesCheckerEasy9VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     WORKING_BATTERIES = 5
 
 
-@register_task("BatteriesCheckerEasy-12-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerEasy-12-VLA-v0", number=92, memory_type="Checklist",
+               max_episode_steps=2160, )
 class BatteriesCheckerEasy12VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     """12 batteries, 7 working (registered, not canonical)."""
 
@@ -76,7 +88,8 @@ class BatteriesCheckerEasy12VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     WORKING_BATTERIES = 7
 
 
-@register_task("BatteriesCheckerEasy-15-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerEasy-15-VLA-v0", number=93, memory_type="Checklist",
+               max_episode_steps=2400, )
 class BatteriesCheckerEasy15VLAEnv(BatteriesCheckerEasyVLABaseEnv):
     """15 batteries, 9 working (registered, not canonical)."""
 

@@ -2,8 +2,16 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._batteries_checker import BatteriesCheckerVLABaseEnv
+
+FAMILY = TaskFamily(
+    "batteries_checker_hard",
+    overlays="batteries_checker",
+    wrapper_table_rank=(28, 28),
+)
+
 
 
 class BatteriesCheckerHardVLABaseEnv(BatteriesCheckerVLABaseEnv):
@@ -27,7 +35,8 @@ class BatteriesCheckerHardVLABaseEnv(BatteriesCheckerVLABaseEnv):
     )
 
 
-@register_task("BatteriesCheckerHard-3-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerHard-3-VLA-v0", number=46, split="long", data_source="MP",
+               memory_type="Checklist", max_episode_steps=1080)
 class BatteriesCheckerHard3VLAEnv(BatteriesCheckerHardVLABaseEnv):
     """3 batteries, 1 working."""
 
@@ -35,7 +44,8 @@ class BatteriesCheckerHard3VLAEnv(BatteriesCheckerHardVLABaseEnv):
     WORKING_BATTERIES = 1
 
 
-@register_task("BatteriesCheckerHard-6-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerHard-6-VLA-v0", number=47, split="long", data_source="MP",
+               memory_type="Checklist", max_episode_steps=2160)
 class BatteriesCheckerHard6VLAEnv(BatteriesCheckerHardVLABaseEnv):
     """6 batteries, 3 working."""
 
@@ -43,7 +53,8 @@ class BatteriesCheckerHard6VLAEnv(BatteriesCheckerHardVLABaseEnv):
     WORKING_BATTERIES = 3
 
 
-@register_task("BatteriesCheckerHard-9-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerHard-9-VLA-v0", number=94, memory_type="Checklist",
+               max_episode_steps=3240, )
 class BatteriesCheckerHard9VLAEnv(BatteriesCheckerHardVLABaseEnv):
     """9 batteries, 5 working (registered, not canonical)."""
 
@@ -51,7 +62,8 @@ class BatteriesCheckerHard9VLAEnv(BatteriesCheckerHardVLABaseEnv):
     WORKING_BATTERIES = 5
 
 
-@register_task("BatteriesCheckerHard-12-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerHard-12-VLA-v0", number=95, memory_type="Checklist",
+               max_episode_steps=4320, )
 class BatteriesCheckerHard12VLAEnv(BatteriesCheckerHardVLABaseEnv):
     """12 batteries, 7 working (registered, not canonical)."""
 
@@ -59,7 +71,8 @@ class BatteriesCheckerHard12VLAEnv(BatteriesCheckerHardVLABaseEnv):
     WORKING_BATTERIES = 7
 
 
-@register_task("BatteriesCheckerHard-15-VLA-v0")
+@register_task(FAMILY, "BatteriesCheckerHard-15-VLA-v0", number=96, memory_type="Checklist",
+               max_episode_steps=4320, )
 class BatteriesCheckerHard15VLAEnv(BatteriesCheckerHardVLABaseEnv):
     """15 batteries, 9 working (registered, not canonical)."""
 

@@ -32,7 +32,15 @@ from mikasa_envs.building_blocks.buttons import (
 )
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
+
+FAMILY = TaskFamily(
+    "blink_count_button_press",
+    overlays="blink_count",
+    wrapper_table_rank=(29, 30),
+)
+
 
 DEFAULT_BLINK_RGB = (0, 0, 255)
 # Bulb names of the two lamps (ColorSwitchLamp indices follow this order).
@@ -442,7 +450,8 @@ class BlinkCountButtonPressVLABaseEnv(MikasaVLABaseEnv):
         return reward
 
 
-@register_task("BlinkCountButtonPressEasy-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressEasy-VLA-v0", number=48, split="short",
+               data_source="MP", memory_type="Temporal", max_episode_steps=150)
 class BlinkCountButtonPressEasyVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """1-3 blinks after 5-10 dark steps."""
 
@@ -450,7 +459,8 @@ class BlinkCountButtonPressEasyVLAEnv(BlinkCountButtonPressVLABaseEnv):
     PRE_BLINK_STEPS = (5, 10)
 
 
-@register_task("BlinkCountButtonPressMedium-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressMedium-VLA-v0", number=49, split="short",
+               data_source="MP", memory_type="Temporal", max_episode_steps=200)
 class BlinkCountButtonPressMediumVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """1-5 blinks after 5-10 dark steps."""
 
@@ -458,7 +468,8 @@ class BlinkCountButtonPressMediumVLAEnv(BlinkCountButtonPressVLABaseEnv):
     PRE_BLINK_STEPS = (5, 10)
 
 
-@register_task("BlinkCountButtonPressHard-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressHard-VLA-v0", number=50, split="medium",
+               data_source="MP", memory_type="Temporal", max_episode_steps=300)
 class BlinkCountButtonPressHardVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """1-7 blinks after 5-10 dark steps."""
 
@@ -466,7 +477,8 @@ class BlinkCountButtonPressHardVLAEnv(BlinkCountButtonPressVLABaseEnv):
     PRE_BLINK_STEPS = (5, 10)
 
 
-@register_task("BlinkCountButtonPressEasy-Long-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressEasy-Long-VLA-v0", number=71, split="long",
+               data_source="MP", memory_type="Temporal", max_episode_steps=1200)
 class BlinkCountButtonPressEasyLongVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """1-10 blinks after 5-50 dark steps."""
 
@@ -474,7 +486,8 @@ class BlinkCountButtonPressEasyLongVLAEnv(BlinkCountButtonPressVLABaseEnv):
     PRE_BLINK_STEPS = (5, 50)
 
 
-@register_task("BlinkCountButtonPressMedium-Long-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressMedium-Long-VLA-v0", number=72, split="long",
+               data_source="MP", memory_type="Temporal", max_episode_steps=1200)
 class BlinkCountButtonPressMediumLongVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """10-20 blinks after 5-50 dark steps."""
 
@@ -482,7 +495,8 @@ class BlinkCountButtonPressMediumLongVLAEnv(BlinkCountButtonPressVLABaseEnv):
     PRE_BLINK_STEPS = (5, 50)
 
 
-@register_task("BlinkCountButtonPressHard-Long-VLA-v0")
+@register_task(FAMILY, "BlinkCountButtonPressHard-Long-VLA-v0", number=73, split="long",
+               data_source="MP", memory_type="Temporal", max_episode_steps=1200)
 class BlinkCountButtonPressHardLongVLAEnv(BlinkCountButtonPressVLABaseEnv):
     """20-30 blinks after 5-50 dark steps."""
 

@@ -7,8 +7,16 @@ from typing import ClassVar
 import numpy as np
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._color_sequence import ColorSequenceVLABaseEnv
+
+FAMILY = TaskFamily(
+    "bunch_of_colors",
+    overlays="memory_capacity",
+    wrapper_table_rank=(21, 22),
+)
+
 
 
 def cue_spot_xyz(num_colors: int = 9, half_size: float = 0.02) -> np.ndarray:
@@ -54,28 +62,32 @@ class BunchOfColorsVLABaseEnv(ColorSequenceVLABaseEnv):
         return cue[None]
 
 
-@register_task("BunchOfColors3-VLA-v0")
+@register_task(FAMILY, "BunchOfColors3-VLA-v0", number=23, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class BunchOfColors3VLAEnv(BunchOfColorsVLABaseEnv):
     """BunchOfColors with 3 targets."""
 
     SEQUENCE_LENGTH = 3
 
 
-@register_task("BunchOfColors5-VLA-v0")
+@register_task(FAMILY, "BunchOfColors5-VLA-v0", number=24, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class BunchOfColors5VLAEnv(BunchOfColorsVLABaseEnv):
     """BunchOfColors with 5 targets."""
 
     SEQUENCE_LENGTH = 5
 
 
-@register_task("BunchOfColors7-VLA-v0")
+@register_task(FAMILY, "BunchOfColors7-VLA-v0", number=25, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class BunchOfColors7VLAEnv(BunchOfColorsVLABaseEnv):
     """BunchOfColors with 7 targets."""
 
     SEQUENCE_LENGTH = 7
 
 
-@register_task("BunchOfColors3-Long-VLA-v0")
+@register_task(FAMILY, "BunchOfColors3-Long-VLA-v0", number=60, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=700)
 class BunchOfColors3LongVLAEnv(BunchOfColors3VLAEnv):
     """BunchOfColors with 3 targets, a 10-100 step cue and a 50-400 step delay."""
 
@@ -83,7 +95,8 @@ class BunchOfColors3LongVLAEnv(BunchOfColors3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("BunchOfColors5-Long-VLA-v0")
+@register_task(FAMILY, "BunchOfColors5-Long-VLA-v0", number=61, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=700)
 class BunchOfColors5LongVLAEnv(BunchOfColors5VLAEnv):
     """BunchOfColors with 5 targets, a 10-100 step cue and a 50-400 step delay."""
 
@@ -91,7 +104,8 @@ class BunchOfColors5LongVLAEnv(BunchOfColors5VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("BunchOfColors7-Long-VLA-v0")
+@register_task(FAMILY, "BunchOfColors7-Long-VLA-v0", number=62, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=700)
 class BunchOfColors7LongVLAEnv(BunchOfColors7VLAEnv):
     """BunchOfColors with 7 targets, a 10-100 step cue and a 50-400 step delay."""
 

@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
+
+FAMILY = TaskFamily(
+    "chain_of_colors",
+    overlays="memory_capacity",
+    wrapper_table_rank=(25, 26),
+)
+
 
 
 class ChainOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
@@ -55,28 +63,32 @@ class ChainOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
         return matches.sum(dim=-1), wrong.sum(dim=-1)
 
 
-@register_task("ChainOfColors3-VLA-v0")
+@register_task(FAMILY, "ChainOfColors3-VLA-v0", number=29, split="medium", data_source="MP",
+               memory_type="Sequential", max_episode_steps=400)
 class ChainOfColors3VLAEnv(ChainOfColorsVLABaseEnv):
     """ChainOfColors with 3 targets."""
 
     SEQUENCE_LENGTH = 3
 
 
-@register_task("ChainOfColors5-VLA-v0")
+@register_task(FAMILY, "ChainOfColors5-VLA-v0", number=30, split="medium", data_source="MP",
+               memory_type="Sequential", max_episode_steps=400)
 class ChainOfColors5VLAEnv(ChainOfColorsVLABaseEnv):
     """ChainOfColors with 5 targets."""
 
     SEQUENCE_LENGTH = 5
 
 
-@register_task("ChainOfColors7-VLA-v0")
+@register_task(FAMILY, "ChainOfColors7-VLA-v0", number=31, split="medium", data_source="MP",
+               memory_type="Sequential", max_episode_steps=400)
 class ChainOfColors7VLAEnv(ChainOfColorsVLABaseEnv):
     """ChainOfColors with 7 targets."""
 
     SEQUENCE_LENGTH = 7
 
 
-@register_task("ChainOfColors3-Long-VLA-v0")
+@register_task(FAMILY, "ChainOfColors3-Long-VLA-v0", number=66, split="long", data_source="MP",
+               memory_type="Sequential", max_episode_steps=800)
 class ChainOfColors3LongVLAEnv(ChainOfColors3VLAEnv):
     """ChainOfColors with 3 targets shown 10-100 steps each and a 50-400 step delay."""
 
@@ -84,7 +96,8 @@ class ChainOfColors3LongVLAEnv(ChainOfColors3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("ChainOfColors5-Long-VLA-v0")
+@register_task(FAMILY, "ChainOfColors5-Long-VLA-v0", number=67, split="long", data_source="MP",
+               memory_type="Sequential", max_episode_steps=1000)
 class ChainOfColors5LongVLAEnv(ChainOfColors5VLAEnv):
     """ChainOfColors with 5 targets shown 10-100 steps each and a 50-400 step delay."""
 
@@ -92,7 +105,8 @@ class ChainOfColors5LongVLAEnv(ChainOfColors5VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("ChainOfColors7-Long-VLA-v0")
+@register_task(FAMILY, "ChainOfColors7-Long-VLA-v0", number=68, split="long", data_source="MP",
+               memory_type="Sequential", max_episode_steps=1200)
 class ChainOfColors7LongVLAEnv(ChainOfColors7VLAEnv):
     """ChainOfColors with 7 targets shown 10-100 steps each and a 50-400 step delay."""
 

@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import ColorCubesMixin, FindImposterVLABaseEnv
+
+FAMILY = TaskFamily(
+    "find_imposter_color",
+    overlays="color_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(18, 18),
+)
+
 
 
 class FindImposterColorVLABaseEnv(ColorCubesMixin, FindImposterVLABaseEnv):
@@ -24,21 +33,24 @@ class FindImposterColorVLABaseEnv(ColorCubesMixin, FindImposterVLABaseEnv):
     )
 
 
-@register_task("FindImposterColor3-VLA-v0")
+@register_task(FAMILY, "FindImposterColor3-VLA-v0", number=35, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterColor3VLAEnv(FindImposterColorVLABaseEnv):
     """FindImposterColor with 3 cubes."""
 
     COLORS = 3
 
 
-@register_task("FindImposterColor5-VLA-v0")
+@register_task(FAMILY, "FindImposterColor5-VLA-v0", number=36, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterColor5VLAEnv(FindImposterColorVLABaseEnv):
     """FindImposterColor with 5 cubes."""
 
     COLORS = 5
 
 
-@register_task("FindImposterColor9-VLA-v0")
+@register_task(FAMILY, "FindImposterColor9-VLA-v0", number=37, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterColor9VLAEnv(FindImposterColorVLABaseEnv):
     """FindImposterColor with 9 cubes."""
 

@@ -3,8 +3,17 @@
 from __future__ import annotations
 
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import BlueShapesMixin, FindImposterVLABaseEnv
+
+FAMILY = TaskFamily(
+    "find_imposter_shape",
+    overlays="shape_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(19, 19),
+)
+
 
 
 class FindImposterShapeVLABaseEnv(BlueShapesMixin, FindImposterVLABaseEnv):
@@ -28,21 +37,24 @@ class FindImposterShapeVLABaseEnv(BlueShapesMixin, FindImposterVLABaseEnv):
     FIXED_OBJECT_Z = SHAPE_SCALE
 
 
-@register_task("FindImposterShape3-VLA-v0")
+@register_task(FAMILY, "FindImposterShape3-VLA-v0", number=38, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterShape3VLAEnv(FindImposterShapeVLABaseEnv):
     """FindImposterShape with cube, sphere, cylinder."""
 
     SHAPES = 3
 
 
-@register_task("FindImposterShape5-VLA-v0")
+@register_task(FAMILY, "FindImposterShape5-VLA-v0", number=39, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterShape5VLAEnv(FindImposterShapeVLABaseEnv):
     """FindImposterShape with 5 shapes."""
 
     SHAPES = 5
 
 
-@register_task("FindImposterShape9-VLA-v0")
+@register_task(FAMILY, "FindImposterShape9-VLA-v0", number=40, split="short", data_source="PPO",
+               memory_type="Negative", max_episode_steps=25)
 class FindImposterShape9VLAEnv(FindImposterShapeVLABaseEnv):
     """FindImposterShape with all 9 shapes."""
 

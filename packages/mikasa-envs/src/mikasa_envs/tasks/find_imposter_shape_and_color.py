@@ -3,8 +3,17 @@
 from __future__ import annotations
 
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, ShapeAndColorMixin, arc_slots
+
+FAMILY = TaskFamily(
+    "find_imposter_shape_and_color",
+    overlays="shape_color_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(20, 20),
+)
+
 
 
 class FindImposterShapeAndColorVLABaseEnv(ShapeAndColorMixin, FindImposterVLABaseEnv):
@@ -35,21 +44,24 @@ class FindImposterShapeAndColorVLABaseEnv(ShapeAndColorMixin, FindImposterVLABas
         return arc_slots(n, radius=radius, even_offset=True, y_shift=y_shift)
 
 
-@register_task("FindImposterShapeAndColor3x2-VLA-v0")
+@register_task(FAMILY, "FindImposterShapeAndColor3x2-VLA-v0", number=41, split="short",
+               data_source="PPO", memory_type="Negative", max_episode_steps=25)
 class FindImposterShapeAndColor3x2VLAEnv(FindImposterShapeAndColorVLABaseEnv):
     """3 colours x 2 shapes (6 objects)."""
 
     SHAPES = 6
 
 
-@register_task("FindImposterShapeAndColor3x3-VLA-v0")
+@register_task(FAMILY, "FindImposterShapeAndColor3x3-VLA-v0", number=42, split="short",
+               data_source="PPO", memory_type="Negative", max_episode_steps=25)
 class FindImposterShapeAndColor3x3VLAEnv(FindImposterShapeAndColorVLABaseEnv):
     """3 colours x 3 shapes (9 objects)."""
 
     SHAPES = 9
 
 
-@register_task("FindImposterShapeAndColor5x3-VLA-v0")
+@register_task(FAMILY, "FindImposterShapeAndColor5x3-VLA-v0", number=43, split="short",
+               data_source="PPO", memory_type="Negative", max_episode_steps=40)
 class FindImposterShapeAndColor5x3VLAEnv(FindImposterShapeAndColorVLABaseEnv):
     """5 shapes x 3 colours (15 objects); 40-step horizon as registered upstream."""
 

@@ -13,8 +13,16 @@ from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube
 from mikasa_envs.building_blocks.discs import build_disc
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses, write_actor_poses
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._lamp_task import LampTaskVLABaseEnv, uniform
+
+FAMILY = TaskFamily(
+    "gather_and_recall",
+    overlays="step_reward",
+    wrapper_table_rank=(35, 35),
+)
+
 
 # Colour index -> (name, RGB): cubes cycle through them, buttons and flash use them.
 RGB_COLORS: tuple[tuple[str, tuple[int, int, int]], ...] = (
@@ -318,35 +326,40 @@ class GatherAndRecallVLABaseEnv(LampTaskVLABaseEnv):
         return self.finish_reward(reward, info, terms)
 
 
-@register_task("GatherAndRecall1-VLA-v0")
+@register_task(FAMILY, "GatherAndRecall1-VLA-v0", number=86, split="short", data_source="MP",
+               memory_type="Prospective", max_episode_steps=200)
 class GatherAndRecall1VLAEnv(GatherAndRecallVLABaseEnv):
     """GatherAndRecall with 1 cube (the flash starts when it first reaches the disc)."""
 
     N_CUBES = 1
 
 
-@register_task("GatherAndRecall3-VLA-v0")
+@register_task(FAMILY, "GatherAndRecall3-VLA-v0", number=87, split="medium", data_source="MP",
+               memory_type="Prospective", max_episode_steps=400)
 class GatherAndRecall3VLAEnv(GatherAndRecallVLABaseEnv):
     """GatherAndRecall with 3 cubes (flash after 1-2 of them)."""
 
     N_CUBES = 3
 
 
-@register_task("GatherAndRecall5-VLA-v0")
+@register_task(FAMILY, "GatherAndRecall5-VLA-v0", number=88, split="medium", data_source="MP",
+               memory_type="Prospective", max_episode_steps=600)
 class GatherAndRecall5VLAEnv(GatherAndRecallVLABaseEnv):
     """GatherAndRecall with 5 cubes (flash after 1-4 of them)."""
 
     N_CUBES = 5
 
 
-@register_task("GatherAndRecall7-VLA-v0")
+@register_task(FAMILY, "GatherAndRecall7-VLA-v0", number=89, split="long", data_source="MP",
+               memory_type="Prospective", max_episode_steps=800)
 class GatherAndRecall7VLAEnv(GatherAndRecallVLABaseEnv):
     """GatherAndRecall with 7 cubes (flash after 1-6 of them)."""
 
     N_CUBES = 7
 
 
-@register_task("GatherAndRecall9-VLA-v0")
+@register_task(FAMILY, "GatherAndRecall9-VLA-v0", number=90, split="long", data_source="MP",
+               memory_type="Prospective", max_episode_steps=1000)
 class GatherAndRecall9VLAEnv(GatherAndRecallVLABaseEnv):
     """GatherAndRecall with 9 cubes (flash after 1-8 of them)."""
 

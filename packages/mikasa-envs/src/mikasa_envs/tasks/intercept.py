@@ -7,8 +7,16 @@ from typing import Any, ClassVar
 import torch
 
 from mikasa_envs.building_blocks.targets import TARGET_Z, build_target_disc, set_disc_pose
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, uniform
+
+FAMILY = TaskFamily(
+    "intercept",
+    overlays="intercept",
+    wrapper_table_rank=(7, 7),
+)
+
 
 
 class InterceptVLABaseEnv(InterceptBallVLABaseEnv):
@@ -97,21 +105,24 @@ class InterceptVLABaseEnv(InterceptBallVLABaseEnv):
         return reward
 
 
-@register_task("InterceptSlow-VLA-v0")
+@register_task(FAMILY, "InterceptSlow-VLA-v0", number=3, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptSlowVLAEnv(InterceptVLABaseEnv):
     """Intercept with a launch speed vy ∈ [0.25, 0.50) m/s."""
 
     VELOCITY_RANGE = (0.25, 0.50)
 
 
-@register_task("InterceptMedium-VLA-v0")
+@register_task(FAMILY, "InterceptMedium-VLA-v0", number=4, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptMediumVLAEnv(InterceptVLABaseEnv):
     """Intercept with a launch speed vy ∈ [0.50, 0.75) m/s."""
 
     VELOCITY_RANGE = (0.50, 0.75)
 
 
-@register_task("InterceptFast-VLA-v0")
+@register_task(FAMILY, "InterceptFast-VLA-v0", number=5, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptFastVLAEnv(InterceptVLABaseEnv):
     """Intercept with a launch speed vy ∈ [0.75, 1.00) m/s."""
 

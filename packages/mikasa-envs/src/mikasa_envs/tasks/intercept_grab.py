@@ -6,8 +6,16 @@ from typing import Any, ClassVar
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv
+
+FAMILY = TaskFamily(
+    "intercept_grab",
+    overlays="intercept",
+    wrapper_table_rank=(8, 8),
+)
+
 
 
 class InterceptGrabVLABaseEnv(InterceptBallVLABaseEnv):
@@ -108,21 +116,24 @@ class InterceptGrabVLABaseEnv(InterceptBallVLABaseEnv):
         return reward
 
 
-@register_task("InterceptGrabSlow-VLA-v0")
+@register_task(FAMILY, "InterceptGrabSlow-VLA-v0", number=6, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptGrabSlowVLAEnv(InterceptGrabVLABaseEnv):
     """InterceptGrab with a launch speed vy ∈ [0.25, 0.50) m/s."""
 
     VELOCITY_RANGE = (0.25, 0.50)
 
 
-@register_task("InterceptGrabMedium-VLA-v0")
+@register_task(FAMILY, "InterceptGrabMedium-VLA-v0", number=7, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptGrabMediumVLAEnv(InterceptGrabVLABaseEnv):
     """InterceptGrab with a launch speed vy ∈ [0.50, 0.75) m/s."""
 
     VELOCITY_RANGE = (0.50, 0.75)
 
 
-@register_task("InterceptGrabFast-VLA-v0")
+@register_task(FAMILY, "InterceptGrabFast-VLA-v0", number=8, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class InterceptGrabFastVLAEnv(InterceptGrabVLABaseEnv):
     """InterceptGrab with a launch speed vy ∈ [0.75, 1.00) m/s."""
 

@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import ColorCubesMixin, RememberVLABaseEnv
+
+FAMILY = TaskFamily(
+    "remember_color",
+    overlays="color_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(12, 13),
+)
+
 
 
 class RememberColorVLABaseEnv(ColorCubesMixin, RememberVLABaseEnv):
@@ -28,28 +37,32 @@ class RememberColorVLABaseEnv(ColorCubesMixin, RememberVLABaseEnv):
         return self.oracle_info
 
 
-@register_task("RememberColor3-VLA-v0")
+@register_task(FAMILY, "RememberColor3-VLA-v0", number=14, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberColor3VLAEnv(RememberColorVLABaseEnv):
     """RememberColor with 3 cubes."""
 
     COLORS = 3
 
 
-@register_task("RememberColor5-VLA-v0")
+@register_task(FAMILY, "RememberColor5-VLA-v0", number=15, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberColor5VLAEnv(RememberColorVLABaseEnv):
     """RememberColor with 5 cubes."""
 
     COLORS = 5
 
 
-@register_task("RememberColor9-VLA-v0")
+@register_task(FAMILY, "RememberColor9-VLA-v0", number=16, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberColor9VLAEnv(RememberColorVLABaseEnv):
     """RememberColor with 9 cubes."""
 
     COLORS = 9
 
 
-@register_task("RememberColor3-Long-VLA-v0")
+@register_task(FAMILY, "RememberColor3-Long-VLA-v0", number=51, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberColor3LongVLAEnv(RememberColor3VLAEnv):
     """RememberColor with 3 cubes, a 10-100 step cue and a 50-450 step delay."""
 
@@ -57,7 +70,8 @@ class RememberColor3LongVLAEnv(RememberColor3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberColor5-Long-VLA-v0")
+@register_task(FAMILY, "RememberColor5-Long-VLA-v0", number=52, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberColor5LongVLAEnv(RememberColor5VLAEnv):
     """RememberColor with 5 cubes, a fixed 100-step cue (as upstream) and a 50-450 step delay."""
 
@@ -65,7 +79,8 @@ class RememberColor5LongVLAEnv(RememberColor5VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberColor9-Long-VLA-v0")
+@register_task(FAMILY, "RememberColor9-Long-VLA-v0", number=53, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberColor9LongVLAEnv(RememberColor9VLAEnv):
     """RememberColor with 9 cubes, a fixed 100-step cue (as upstream) and a 50-450 step delay."""
 

@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import BlueShapesMixin, RememberVLABaseEnv
+
+FAMILY = TaskFamily(
+    "remember_shape",
+    overlays="shape_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(14, 15),
+)
+
 
 
 class RememberShapeVLABaseEnv(BlueShapesMixin, RememberVLABaseEnv):
@@ -30,28 +39,32 @@ class RememberShapeVLABaseEnv(BlueShapesMixin, RememberVLABaseEnv):
         return self.oracle_info
 
 
-@register_task("RememberShape3-VLA-v0")
+@register_task(FAMILY, "RememberShape3-VLA-v0", number=17, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberShape3VLAEnv(RememberShapeVLABaseEnv):
     """RememberShape with cube, sphere, cylinder."""
 
     SHAPES = 3
 
 
-@register_task("RememberShape5-VLA-v0")
+@register_task(FAMILY, "RememberShape5-VLA-v0", number=18, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberShape5VLAEnv(RememberShapeVLABaseEnv):
     """RememberShape with 5 shapes (+ cross, torus)."""
 
     SHAPES = 5
 
 
-@register_task("RememberShape9-VLA-v0")
+@register_task(FAMILY, "RememberShape9-VLA-v0", number=19, split="short", data_source="PPO",
+               memory_type="Object", max_episode_steps=25)
 class RememberShape9VLAEnv(RememberShapeVLABaseEnv):
     """RememberShape with all 9 shapes."""
 
     SHAPES = 9
 
 
-@register_task("RememberShape3-Long-VLA-v0")
+@register_task(FAMILY, "RememberShape3-Long-VLA-v0", number=54, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberShape3LongVLAEnv(RememberShape3VLAEnv):
     """RememberShape3 with a 10-100 step cue and a 50-450 step delay."""
 
@@ -59,7 +72,8 @@ class RememberShape3LongVLAEnv(RememberShape3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberShape5-Long-VLA-v0")
+@register_task(FAMILY, "RememberShape5-Long-VLA-v0", number=55, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberShape5LongVLAEnv(RememberShape5VLAEnv):
     """RememberShape5 with a 10-100 step cue and a 50-450 step delay."""
 
@@ -67,7 +81,8 @@ class RememberShape5LongVLAEnv(RememberShape5VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberShape9-Long-VLA-v0")
+@register_task(FAMILY, "RememberShape9-Long-VLA-v0", number=56, split="medium", data_source="MP",
+               memory_type="Object", max_episode_steps=600)
 class RememberShape9LongVLAEnv(RememberShape9VLAEnv):
     """RememberShape9 with a 10-100 step cue and a 50-450 step delay."""
 

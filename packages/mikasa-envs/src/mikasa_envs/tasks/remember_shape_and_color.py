@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import RememberVLABaseEnv, ShapeAndColorMixin, arc_slots
+
+FAMILY = TaskFamily(
+    "remember_shape_and_color",
+    overlays="shape_color_memory",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(16, 17),
+)
+
 
 
 class RememberShapeAndColorVLABaseEnv(ShapeAndColorMixin, RememberVLABaseEnv):
@@ -31,28 +40,32 @@ class RememberShapeAndColorVLABaseEnv(ShapeAndColorMixin, RememberVLABaseEnv):
         return arc_slots(self.SHAPES, radius=0.3, even_offset=True, y_shift=y_shift)
 
 
-@register_task("RememberShapeAndColor3x2-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor3x2-VLA-v0", number=20, split="short",
+               data_source="PPO", memory_type="Object", max_episode_steps=25)
 class RememberShapeAndColor3x2VLAEnv(RememberShapeAndColorVLABaseEnv):
     """3 colours x 2 shapes (6 objects)."""
 
     SHAPES = 6
 
 
-@register_task("RememberShapeAndColor3x3-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor3x3-VLA-v0", number=21, split="short",
+               data_source="PPO", memory_type="Object", max_episode_steps=25)
 class RememberShapeAndColor3x3VLAEnv(RememberShapeAndColorVLABaseEnv):
     """3 colours x 3 shapes (9 objects)."""
 
     SHAPES = 9
 
 
-@register_task("RememberShapeAndColor5x3-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor5x3-VLA-v0", number=22, split="short",
+               data_source="PPO", memory_type="Object", max_episode_steps=25)
 class RememberShapeAndColor5x3VLAEnv(RememberShapeAndColorVLABaseEnv):
     """5 shapes x 3 colours (15 objects)."""
 
     SHAPES = 15
 
 
-@register_task("RememberShapeAndColor3x2-Long-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor3x2-Long-VLA-v0", number=57, split="medium",
+               data_source="MP", memory_type="Object", max_episode_steps=600)
 class RememberShapeAndColor3x2LongVLAEnv(RememberShapeAndColor3x2VLAEnv):
     """3x2 with a 10-100 step cue and a 50-450 step delay."""
 
@@ -60,7 +73,8 @@ class RememberShapeAndColor3x2LongVLAEnv(RememberShapeAndColor3x2VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberShapeAndColor3x3-Long-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor3x3-Long-VLA-v0", number=58, split="medium",
+               data_source="MP", memory_type="Object", max_episode_steps=600)
 class RememberShapeAndColor3x3LongVLAEnv(RememberShapeAndColor3x3VLAEnv):
     """3x3 with a 10-100 step cue and a 50-450 step delay."""
 
@@ -68,7 +82,8 @@ class RememberShapeAndColor3x3LongVLAEnv(RememberShapeAndColor3x3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 450)
 
 
-@register_task("RememberShapeAndColor5x3-Long-VLA-v0")
+@register_task(FAMILY, "RememberShapeAndColor5x3-Long-VLA-v0", number=59, split="medium",
+               data_source="MP", memory_type="Object", max_episode_steps=600)
 class RememberShapeAndColor5x3LongVLAEnv(RememberShapeAndColor5x3VLAEnv):
     """5x3 with a 10-100 step cue and a 50-450 step delay."""
 

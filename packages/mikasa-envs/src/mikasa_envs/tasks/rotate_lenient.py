@@ -6,8 +6,16 @@ from typing import Any
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv
+
+FAMILY = TaskFamily(
+    "rotate_lenient",
+    overlays="rotate",
+    wrapper_table_rank=(9, 9),
+)
+
 
 
 class RotateLenientVLABaseEnv(RotatePegVLABaseEnv):
@@ -57,14 +65,16 @@ class RotateLenientVLABaseEnv(RotatePegVLABaseEnv):
         return self._finish_reward(reward, reward_dict)
 
 
-@register_task("RotateLenientPos-VLA-v0")
+@register_task(FAMILY, "RotateLenientPos-VLA-v0", number=9, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class RotateLenientPosVLAEnv(RotateLenientVLABaseEnv):
     """RotateLenient with counter-clockwise targets of 0.1 to π/2 rad."""
 
     MODE = MODE_POS
 
 
-@register_task("RotateLenientPosNeg-VLA-v0")
+@register_task(FAMILY, "RotateLenientPosNeg-VLA-v0", number=10, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class RotateLenientPosNegVLAEnv(RotateLenientVLABaseEnv):
     """RotateLenient with targets of −0.44 to −0.1 or 0.44 to π/4 rad."""
 

@@ -6,8 +6,16 @@ from typing import Any, ClassVar
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv
+
+FAMILY = TaskFamily(
+    "rotate_strict",
+    overlays="rotate",
+    wrapper_table_rank=(10, 10),
+)
+
 
 
 class RotateStrictVLABaseEnv(RotatePegVLABaseEnv):
@@ -73,14 +81,16 @@ class RotateStrictVLABaseEnv(RotatePegVLABaseEnv):
         return self._finish_reward(reward, reward_dict)
 
 
-@register_task("RotateStrictPos-VLA-v0")
+@register_task(FAMILY, "RotateStrictPos-VLA-v0", number=11, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=90)
 class RotateStrictPosVLAEnv(RotateStrictVLABaseEnv):
     """RotateStrict with counter-clockwise targets of 0.1 to π/2 rad."""
 
     MODE = MODE_POS
 
 
-@register_task("RotateStrictPosNeg-VLA-v0")
+@register_task(FAMILY, "RotateStrictPosNeg-VLA-v0", number=12, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=90)
 class RotateStrictPosNegVLAEnv(RotateStrictVLABaseEnv):
     """RotateStrict with targets of −0.44 to −0.1 or 0.44 to π/4 rad."""
 

@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
+
+FAMILY = TaskFamily(
+    "seq_of_colors",
+    overlays="memory_capacity",
+    wrapper_table_rank=(23, 24),
+)
+
 
 
 class SeqOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
@@ -50,28 +58,32 @@ class SeqOfColorsVLABaseEnv(OrderedColorSequenceVLABaseEnv):
         return torch.where(ok, key, -1)
 
 
-@register_task("SeqOfColors3-VLA-v0")
+@register_task(FAMILY, "SeqOfColors3-VLA-v0", number=26, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class SeqOfColors3VLAEnv(SeqOfColorsVLABaseEnv):
     """SeqOfColors with 3 targets."""
 
     SEQUENCE_LENGTH = 3
 
 
-@register_task("SeqOfColors5-VLA-v0")
+@register_task(FAMILY, "SeqOfColors5-VLA-v0", number=27, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class SeqOfColors5VLAEnv(SeqOfColorsVLABaseEnv):
     """SeqOfColors with 5 targets."""
 
     SEQUENCE_LENGTH = 5
 
 
-@register_task("SeqOfColors7-VLA-v0")
+@register_task(FAMILY, "SeqOfColors7-VLA-v0", number=28, split="medium", data_source="MP",
+               memory_type="Capacity", max_episode_steps=400)
 class SeqOfColors7VLAEnv(SeqOfColorsVLABaseEnv):
     """SeqOfColors with 7 targets."""
 
     SEQUENCE_LENGTH = 7
 
 
-@register_task("SeqOfColors3-Long-VLA-v0")
+@register_task(FAMILY, "SeqOfColors3-Long-VLA-v0", number=63, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=800)
 class SeqOfColors3LongVLAEnv(SeqOfColors3VLAEnv):
     """SeqOfColors with 3 targets shown 10-100 steps each and a 50-400 step delay."""
 
@@ -79,7 +91,8 @@ class SeqOfColors3LongVLAEnv(SeqOfColors3VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("SeqOfColors5-Long-VLA-v0")
+@register_task(FAMILY, "SeqOfColors5-Long-VLA-v0", number=64, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=1000)
 class SeqOfColors5LongVLAEnv(SeqOfColors5VLAEnv):
     """SeqOfColors with 5 targets shown 10-100 steps each and a 50-400 step delay."""
 
@@ -87,7 +100,8 @@ class SeqOfColors5LongVLAEnv(SeqOfColors5VLAEnv):
     EMPTY_PHASE_STEPS = (50, 400)
 
 
-@register_task("SeqOfColors7-Long-VLA-v0")
+@register_task(FAMILY, "SeqOfColors7-Long-VLA-v0", number=65, split="long", data_source="MP",
+               memory_type="Capacity", max_episode_steps=1200)
 class SeqOfColors7LongVLAEnv(SeqOfColors7VLAEnv):
     """SeqOfColors with 7 targets shown 10-100 steps each and a 50-400 step delay."""
 

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv
 
+FAMILY = TaskFamily(
+    "shell_game_color_lamp_touch",
+    overlays="shell_game",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(4, 4),
+)
 
-@register_task("ShellGameColorLampTouch-VLA-v0")
+
+
+@register_task(FAMILY, "ShellGameColorLampTouch-VLA-v0", number=34, split="short",
+               data_source="PPO", memory_type="Spatial", max_episode_steps=30)
 class ShellGameColorLampTouchVLAEnv(ColorLampShellGameVLABaseEnv):
     """**Task Description:** a red, a green and a blue ball lie on the table at three places
     (always red Left, green Center, blue Right); then the balls disappear, three

@@ -6,6 +6,7 @@ from typing import Any, ClassVar
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import (
     MUG_QUAT_HANDLE_TOWARD_ROBOT,
@@ -13,8 +14,13 @@ from mikasa_envs.tasks._shell_game import (
     HiddenBallShellGameVLABaseEnv,
 )
 
+FAMILY = TaskFamily(
+    "shell_game_pick",
+)
 
-@register_task("ShellGamePick-VLA-v0")
+
+@register_task(FAMILY, "ShellGamePick-VLA-v0", number=97, memory_type="Spatial",
+               max_episode_steps=30)
 class ShellGamePickVLAEnv(GoalSiteMixin, HiddenBallShellGameVLABaseEnv):
     """**Task Description:** a red ball lies on the table at one of three places; then three
     upside-down mugs appear over the three places, handles toward the robot, and one of

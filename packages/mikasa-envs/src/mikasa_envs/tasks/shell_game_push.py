@@ -6,11 +6,21 @@ from typing import Any, ClassVar
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import GoalSiteMixin, HiddenBallShellGameVLABaseEnv
 
+FAMILY = TaskFamily(
+    "shell_game_push",
+    overlays="shell_game",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(1, 1),
+)
 
-@register_task("ShellGamePush-VLA-v0")
+
+
+@register_task(FAMILY, "ShellGamePush-VLA-v0", number=2, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=30)
 class ShellGamePushVLAEnv(GoalSiteMixin, HiddenBallShellGameVLABaseEnv):
     """**Task Description:** a red ball lies on the table at one of three places; then three
     upside-down mugs appear over the three places and one of them hides the ball. Push that

@@ -3,8 +3,17 @@ shuffle, then touch the cup the lamp's colour names."""
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import SHUFFLE_TASK_STATE, ColorLampShellGameVLABaseEnv
+
+FAMILY = TaskFamily(
+    "shell_game_shuffle_color_lamp_touch",
+    overlays="shell_game",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(3, 6),
+)
+
 
 
 class ShellGameShuffleColorLampTouchVLABaseEnv(ColorLampShellGameVLABaseEnv):
@@ -35,14 +44,16 @@ class ShellGameShuffleColorLampTouchVLABaseEnv(ColorLampShellGameVLABaseEnv):
     LAMP_RADIUS = 0.018
 
 
-@register_task("ShellGameShuffleColorLampTouch-VLA-v0")
+@register_task(FAMILY, "ShellGameShuffleColorLampTouch-VLA-v0", number=33, split="short",
+               data_source="PPO", memory_type="Tracking", max_episode_steps=60)
 class ShellGameShuffleColorLampTouchVLAEnv(ShellGameShuffleColorLampTouchVLABaseEnv):
     """ShellGameShuffleColorLampTouch: 1-5 cue steps, a 20-35 step shuffle of 2-4 swaps."""
 
     CUE_PHASE_STEPS = (1, 5)
 
 
-@register_task("ShellGameShuffleColorLampTouch-Long-VLA-v0")
+@register_task(FAMILY, "ShellGameShuffleColorLampTouch-Long-VLA-v0", number=70, split="medium",
+               data_source="MP", memory_type="Tracking", max_episode_steps=600)
 class ShellGameShuffleColorLampTouchLongVLAEnv(ShellGameShuffleColorLampTouchVLABaseEnv):
     """ShellGameShuffleColorLampTouch: 10-100 cue steps, a 100-400 step shuffle of 5-15 swaps."""
 

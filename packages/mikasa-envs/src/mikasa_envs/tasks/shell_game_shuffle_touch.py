@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 from mani_skill.utils.structs import Actor
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import (
     SHUFFLE_TASK_STATE,
@@ -12,6 +13,14 @@ from mikasa_envs.tasks._shell_game import (
     ScriptedShellGameVLABaseEnv,
     TouchMugMixin,
 )
+
+FAMILY = TaskFamily(
+    "shell_game_shuffle_touch",
+    overlays="shell_game",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(2, 5),
+)
+
 
 
 class ShellGameShuffleTouchVLABaseEnv(TouchMugMixin, RedBallMixin, ScriptedShellGameVLABaseEnv):
@@ -53,14 +62,16 @@ class ShellGameShuffleTouchVLABaseEnv(TouchMugMixin, RedBallMixin, ScriptedShell
         return ball[:, None]
 
 
-@register_task("ShellGameShuffleTouch-VLA-v0")
+@register_task(FAMILY, "ShellGameShuffleTouch-VLA-v0", number=32, split="short", data_source="PPO",
+               memory_type="Tracking", max_episode_steps=60)
 class ShellGameShuffleTouchVLAEnv(ShellGameShuffleTouchVLABaseEnv):
     """ShellGameShuffleTouch: 1-5 cue steps, a 20-35 step shuffle of 2-4 swaps."""
 
     CUE_PHASE_STEPS = (1, 5)
 
 
-@register_task("ShellGameShuffleTouch-Long-VLA-v0")
+@register_task(FAMILY, "ShellGameShuffleTouch-Long-VLA-v0", number=69, split="medium",
+               data_source="MP", memory_type="Tracking", max_episode_steps=600)
 class ShellGameShuffleTouchLongVLAEnv(ShellGameShuffleTouchVLABaseEnv):
     """ShellGameShuffleTouch: 10-100 cue steps, a 100-400 step shuffle of 5-15 swaps."""
 

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import HiddenBallShellGameVLABaseEnv, TouchMugMixin
 
+FAMILY = TaskFamily(
+    "shell_game_touch",
+    overlays="shell_game",
+    frozen_cue_on_short_ids=True,
+    wrapper_table_rank=(0, 0),
+)
 
-@register_task("ShellGameTouch-VLA-v0")
+
+
+@register_task(FAMILY, "ShellGameTouch-VLA-v0", number=1, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=30)
 class ShellGameTouchVLAEnv(TouchMugMixin, HiddenBallShellGameVLABaseEnv):
     """**Task Description:** a red ball lies on the table at one of three places; then three
     upside-down mugs appear over the three places and one of them hides the ball. Touch

@@ -21,8 +21,16 @@ from mikasa_envs.building_blocks.targets import (
     build_target_disc,
     set_disc_pose,
 )
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._intercept import SMALL_SCENE_GPU_MEMORY
+
+FAMILY = TaskFamily(
+    "take_it_back",
+    overlays="intercept",
+    wrapper_table_rank=(11, 11),
+)
+
 
 CUBE_GREEN_255 = (0, 255, 0, 255)
 START_MARKER_BLUE_255 = (0, 0, 255, 255)
@@ -32,7 +40,8 @@ GOAL_RED_255 = (194, 19, 22, 255)
 GOAL_CHANGED_PURPLE_255 = (147, 0, 211, 255)
 
 
-@register_task("TakeItBack-VLA-v0")
+@register_task(FAMILY, "TakeItBack-VLA-v0", number=13, split="short", data_source="PPO",
+               memory_type="Spatial", max_episode_steps=60)
 class TakeItBackVLAEnv(MikasaVLABaseEnv):
     """**Task Description:** a green cube stands on the table. Push it onto the red/white
     target; once it gets there the target turns purple/white, and the cube must be brought

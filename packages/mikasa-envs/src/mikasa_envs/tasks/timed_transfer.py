@@ -16,8 +16,16 @@ from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube
 from mikasa_envs.building_blocks.discs import build_disc
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses, write_actor_poses
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._lamp_task import LampTaskVLABaseEnv, uniform
+
+FAMILY = TaskFamily(
+    "timed_transfer",
+    overlays="timed_transfer",
+    wrapper_table_rank=(33, 34),
+)
+
 
 
 class TimedTransferVLABaseEnv(LampTaskVLABaseEnv):
@@ -239,42 +247,48 @@ class TimedTransferVLABaseEnv(LampTaskVLABaseEnv):
         return self.finish_reward(reward, info, terms)
 
 
-@register_task("TimedTransferEasy-VLA-v0")
+@register_task(FAMILY, "TimedTransferEasy-VLA-v0", number=80, split="short", data_source="MP",
+               memory_type="Temporal", max_episode_steps=200)
 class TimedTransferEasyVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 100-step delay (window [95, 105] after the signal)."""
 
     DELAY_STEPS = 100
 
 
-@register_task("TimedTransferMedium-VLA-v0")
+@register_task(FAMILY, "TimedTransferMedium-VLA-v0", number=81, split="medium", data_source="MP",
+               memory_type="Temporal", max_episode_steps=250)
 class TimedTransferMediumVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 150-step delay (window [142, 157] after the signal)."""
 
     DELAY_STEPS = 150
 
 
-@register_task("TimedTransferHard-VLA-v0")
+@register_task(FAMILY, "TimedTransferHard-VLA-v0", number=82, split="medium", data_source="MP",
+               memory_type="Temporal", max_episode_steps=300)
 class TimedTransferHardVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 200-step delay (window [190, 210] after the signal)."""
 
     DELAY_STEPS = 200
 
 
-@register_task("TimedTransferEasy-Long-VLA-v0")
+@register_task(FAMILY, "TimedTransferEasy-Long-VLA-v0", number=83, split="medium", data_source="MP",
+               memory_type="Temporal", max_episode_steps=600)
 class TimedTransferEasyLongVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 300-step delay (window [285, 315] after the signal)."""
 
     DELAY_STEPS = 300
 
 
-@register_task("TimedTransferMedium-Long-VLA-v0")
+@register_task(FAMILY, "TimedTransferMedium-Long-VLA-v0", number=84, split="long", data_source="MP",
+               memory_type="Temporal", max_episode_steps=900)
 class TimedTransferMediumLongVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 500-step delay (window [475, 525] after the signal)."""
 
     DELAY_STEPS = 500
 
 
-@register_task("TimedTransferHard-Long-VLA-v0")
+@register_task(FAMILY, "TimedTransferHard-Long-VLA-v0", number=85, split="long", data_source="MP",
+               memory_type="Temporal", max_episode_steps=1200)
 class TimedTransferHardLongVLAEnv(TimedTransferVLABaseEnv):
     """TimedTransfer with a 1000-step delay (window [950, 1050] after the signal)."""
 

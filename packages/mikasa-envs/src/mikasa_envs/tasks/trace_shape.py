@@ -6,6 +6,7 @@ from typing import Any
 
 import torch
 
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._trace_shape import (
     NUM_WAYPOINTS,
@@ -14,6 +15,13 @@ from mikasa_envs.tasks._trace_shape import (
     SHAPE_TRIANGLE,
     TraceShapeCommonVLABaseEnv,
 )
+
+FAMILY = TaskFamily(
+    "trace_shape",
+    overlays="trace_shape",
+    wrapper_table_rank=(31, 31),
+)
+
 
 
 class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
@@ -126,21 +134,24 @@ class TraceShapeVLABaseEnv(TraceShapeCommonVLABaseEnv):
         return reward
 
 
-@register_task("TraceShapeEasy-VLA-v0")
+@register_task(FAMILY, "TraceShapeEasy-VLA-v0", number=74, split="medium", data_source="MP",
+               memory_type="Procedural", max_episode_steps=250)
 class TraceShapeEasyVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles only."""
 
     SHAPE_SET = (SHAPE_CIRCLE,)
 
 
-@register_task("TraceShapeMedium-VLA-v0")
+@register_task(FAMILY, "TraceShapeMedium-VLA-v0", number=75, split="medium", data_source="MP",
+               memory_type="Procedural", max_episode_steps=300)
 class TraceShapeMediumVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles and squares."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE)
 
 
-@register_task("TraceShapeHard-VLA-v0")
+@register_task(FAMILY, "TraceShapeHard-VLA-v0", number=76, split="medium", data_source="MP",
+               memory_type="Procedural", max_episode_steps=350)
 class TraceShapeHardVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles, squares and triangles."""
 

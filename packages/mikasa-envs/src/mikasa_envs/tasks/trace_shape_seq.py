@@ -13,6 +13,7 @@ from mikasa_envs.building_blocks.buttons import (
     RELEASED_DEPTH,
     Button,
 )
+from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._trace_shape import (
     NUM_WAYPOINTS,
@@ -22,6 +23,13 @@ from mikasa_envs.tasks._trace_shape import (
     SHAPE_TRIANGLE,
     TraceShapeCommonVLABaseEnv,
 )
+
+FAMILY = TaskFamily(
+    "trace_shape_seq",
+    overlays="trace_shape",
+    wrapper_table_rank=(32, 32),
+)
+
 
 
 class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
@@ -293,21 +301,24 @@ class TraceShapeSeqVLABaseEnv(TraceShapeCommonVLABaseEnv):
         return reward
 
 
-@register_task("TraceShapeSeqEasy-VLA-v0")
+@register_task(FAMILY, "TraceShapeSeqEasy-VLA-v0", number=77, split="long", data_source="MP",
+               memory_type="Procedural", max_episode_steps=1500)
 class TraceShapeSeqEasyVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles only."""
 
     SHAPE_SET = (SHAPE_CIRCLE,)
 
 
-@register_task("TraceShapeSeqMedium-VLA-v0")
+@register_task(FAMILY, "TraceShapeSeqMedium-VLA-v0", number=78, split="long", data_source="MP",
+               memory_type="Procedural", max_episode_steps=1500)
 class TraceShapeSeqMediumVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles and squares."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE)
 
 
-@register_task("TraceShapeSeqHard-VLA-v0")
+@register_task(FAMILY, "TraceShapeSeqHard-VLA-v0", number=79, split="long", data_source="MP",
+               memory_type="Procedural", max_episode_steps=1500)
 class TraceShapeSeqHardVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles, squares and triangles."""
 
