@@ -171,7 +171,7 @@ else:
         images[1] //= 16  # smooth enough for PIL's encoder to pick other filters
         ours = [rlds.encode_png(image) for image in images]
         assert np.array_equal(rlds.decode_pngs(ours), images)
-        rows, _, _ = rlds._png_rows(ours[0])
+        rows, _, _ = rlds.png_rows(ours[0])
         none_rows = bytearray(rows.tobytes())
         for r in range(0, 16, 2):  # filter byte 0 and the raw pixels on even rows
             start = r * rows.shape[1]
@@ -187,7 +187,7 @@ else:
             return buffer.getvalue()
 
         theirs = [pil_png(image) for image in images]
-        assert any(rlds._png_rows(p)[0][:, 0].max() > 1 for p in theirs)
+        assert any(rlds.png_rows(p)[0][:, 0].max() > 1 for p in theirs)
         assert np.array_equal(rlds.decode_pngs(theirs), images)
         rgba = rlds.decode_pngs([pil_png(images[2], "RGBA")])
         assert rgba.shape == (1, 16, 20, 4) and np.array_equal(rgba[0, ..., :3], images[2])

@@ -28,12 +28,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from mikasa_datasets.loaders import (
+from mikasa_datasets.conversion import (
     DatasetFormatError,
     MissingDependencyError,
     OutputExistsError,
-    find_task_dir,
 )
+from mikasa_datasets.loaders import find_task_dir
 from mikasa_datasets.npz import DATA_NPZ_DIRNAME, EpisodeFormatError, list_episode_files
 
 __all__ = ["build_parser", "main"]

@@ -1,8 +1,9 @@
 """LeRobotDataset v3 export (RLDS -> LeRobot, NPZ -> LeRobot) and reading (datasets spec
 §7), through lerobot's public API only (lerobot 0.4.x); nothing of lerobot is patched, so a
 lerobot upgrade can change speed or defaults but not break what this code relies on
-silently. Writing lives in :mod:`mikasa_datasets.lerobot_write` (its names are importable
-from here too); this module holds the format's names, lerobot's import and the reader.
+silently. Writing lives in :mod:`mikasa_datasets.lerobot_write`, the format's names and
+lerobot's import in :mod:`mikasa_datasets.lerobot_format`; this module holds the reader and
+re-exports the names of both, so every name is importable from here.
 
 A written dataset is what lerobot produces: ``meta/info.json`` (``codebase_version``
 v3.0), ``meta/stats.json``, ``meta/tasks.parquet``, ``meta/episodes/...``,
@@ -45,19 +46,43 @@ start-up hook the setup script installs, elsewhere through
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import json
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
-from mikasa_datasets import torchvision_cpu
-from mikasa_datasets.loaders import DatasetFormatError, require
-from mikasa_datasets.rlds import ConversionResult
+from mikasa_datasets.conversion import ConversionResult, DatasetFormatError, require
+from mikasa_datasets.lerobot_format import (
+    ACTION_KEY,
+    CAMERA_KEYS,
+    DEFAULT_FPS,
+    DEFAULT_VCODEC,
+    DONE_KEY,
+    IMAGE_SHAPE,  # noqa: F401 (re-exported: defined here before the split)
+    LEROBOT_DIRNAME,
+    REWARD_KEY,
+    ROBOT_TYPE,
+    SOURCE_METADATA_NAME,
+    STATE_KEY,
+    SUCCESS_KEY,
+    TOP_KEY,
+    WRIST_KEY,
+    ensure_torchvision_importable,
+    lerobot_dataset_class,
+    lerobot_features,
+)
+from mikasa_datasets.lerobot_write import (
+    EPISODES_PER_WORKER,
+    VIDEO_FILE_SIZE_IN_MB,
+    convert_npz_to_lerobot,
+    convert_rlds_to_lerobot,
+    write_lerobot,
+    writer_count,
+)
 
 __all__ = [
     "ACTION_KEY",
@@ -87,95 +112,6 @@ __all__ = [
     "write_lerobot",
     "writer_count",
 ]
-_WRITER_NAMES = frozenset(
-    {
-        "EPISODES_PER_WORKER",
-        "VIDEO_FILE_SIZE_IN_MB",
-        "convert_npz_to_lerobot",
-        "convert_rlds_to_lerobot",
-        "write_lerobot",
-        "writer_count",
-    }
-)
-"""Defined in `lerobot_write` and exported here (`__getattr__`)."""
-if TYPE_CHECKING:
-    from mikasa_datasets.lerobot_write import (
-        EPISODES_PER_WORKER,
-        VIDEO_FILE_SIZE_IN_MB,
-        convert_npz_to_lerobot,
-        convert_rlds_to_lerobot,
-        write_lerobot,
-        writer_count,
-    )
-
-LEROBOT_DIRNAME = "data_lerobot"
-DEFAULT_FPS = 10
-ROBOT_TYPE = "mikasa_robo"
-DEFAULT_VCODEC = "libsvtav1"
-"""lerobot's default codec, SVT-AV1 at lerobot's settings; why not H.264: `lerobot_write`."""
-SOURCE_METADATA_NAME = "source_rlds_metadata.json"
-
-TOP_KEY = "observation.images.top"
-WRIST_KEY = "observation.images.wrist"
-STATE_KEY = "observation.state"
-ACTION_KEY = "action"
-REWARD_KEY = "next.reward"
-SUCCESS_KEY = "next.success"
-DONE_KEY = "next.done"
-CAMERA_KEYS = (TOP_KEY, WRIST_KEY)
-IMAGE_SHAPE = (128, 128, 3)
-
-
-# --------------------------------------------------------------------------- lerobot import
-def ensure_torchvision_importable() -> None:
-    """Make ``import torchvision`` work with a CPU torch and PyPI's CUDA torchvision.
-
-    torchvision's ``_C`` ops library links against libtorch_cuda, so with the CPU build of
-    torch it fails to load (torchvision tolerates that), and then its import dies
-    registering fake kernels for ``torchvision::nms``/``qnms``, ops that only ``_C``
-    defines. :mod:`mikasa_datasets.torchvision_cpu` declares those two schemas through
-    torch's public ``torch.library`` once ``_C`` has failed to load, which lets the
-    pure-Python parts (models, transforms: what lerobot's dataset and policy code use)
-    import; the detection ops stay unusable, and nothing here calls them. A torchvision
-    whose ``_C`` loads is left untouched; a missing one is left to the importer to report.
-    In ``.venv-datasets`` the same code already runs as a start-up hook (so plain
-    ``lerobot-train`` / ``lerobot-eval`` work there); this call makes it work in any other
-    environment too. Also used by mikasa-bench's LeRobot policies
-    (`mikasa_bench.lerobot_policy`).
-    """
-    torchvision_cpu.ensure_importable()
-
-
-@functools.cache
-def lerobot_dataset_class() -> type:
-    """``lerobot.datasets.lerobot_dataset.LeRobotDataset``, imported offline."""
-    # Must precede the first huggingface_hub / datasets import: both read it at import.
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
-    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")  # datasets imports TF when present
-    os.environ.setdefault("TF_ENABLE_ONEDNN_OPTS", "0")
-    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints a banner per encoder otherwise
-    require("torch", "lerobot")
-    ensure_torchvision_importable()
-    return require("lerobot.datasets.lerobot_dataset", "lerobot").LeRobotDataset
-
-
-def lerobot_features(*, use_videos: bool = True) -> dict[str, dict[str, Any]]:
-    """The LeRobot ``features`` mapping written by the converters (module docstring)."""
-    cam = {
-        "dtype": "video" if use_videos else "image",
-        "shape": IMAGE_SHAPE,
-        "names": ["height", "width", "channel"],
-    }
-    return {
-        TOP_KEY: dict(cam),
-        WRIST_KEY: dict(cam),
-        STATE_KEY: {"dtype": "float32", "shape": (7,), "names": None},
-        ACTION_KEY: {"dtype": "float32", "shape": (7,), "names": None},
-        REWARD_KEY: {"dtype": "float32", "shape": (1,), "names": None},
-        SUCCESS_KEY: {"dtype": "bool", "shape": (1,), "names": None},
-        DONE_KEY: {"dtype": "bool", "shape": (1,), "names": None},
-    }
 
 
 # --------------------------------------------------------------------------- reading
@@ -379,13 +315,3 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     """Peak signal-to-noise ratio in dB of two uint8 arrays (inf when identical)."""
     mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
     return float("inf") if mse == 0 else 10.0 * np.log10(255.0**2 / mse)
-
-
-def __getattr__(name: str) -> Any:
-    """The writer's names (`convert_npz_to_lerobot`, ...), imported on first use: the
-    writer imports this module, so importing it here eagerly would be circular."""
-    if name in _WRITER_NAMES:
-        from mikasa_datasets import lerobot_write
-
-        return getattr(lerobot_write, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

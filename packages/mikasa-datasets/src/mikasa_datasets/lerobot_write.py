@@ -1,7 +1,8 @@
 """Writing LeRobotDataset v3 (RLDS -> LeRobot, NPZ -> LeRobot) with lerobot's public API
 only: ``LeRobotDataset.create`` / ``add_frame`` / ``save_episode`` / ``finalize``, and
-``aggregate_datasets`` to join parallel writers. Format, features and reading:
-:mod:`mikasa_datasets.lerobot`, which also exports every public name here.
+``aggregate_datasets`` to join parallel writers. Format and features:
+:mod:`mikasa_datasets.lerobot_format`; reading: :mod:`mikasa_datasets.lerobot`, which also
+exports every public name here.
 
 Speed comes from processes, not from changing lerobot: a large conversion runs several
 writer processes (`writer_count`), each writing a contiguous share of the episodes as a
@@ -45,7 +46,17 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_datasets.lerobot import (
+from mikasa_datasets import rlds_read
+from mikasa_datasets.conversion import (
+    ConversionResult,
+    DatasetFormatError,
+    commit_output,
+    new_staging_dir,
+    npz_task_files,
+    output_action,
+    remove_stale_staging,
+)
+from mikasa_datasets.lerobot_format import (
     DEFAULT_FPS,
     DEFAULT_VCODEC,
     ROBOT_TYPE,
@@ -54,22 +65,14 @@ from mikasa_datasets.lerobot import (
 )
 from mikasa_datasets.lerobot_write_parts import (
     EpisodeRange,
-    _fix_image_stats,
-    _prefetch,
-    _write_in_parts,
-    _write_part,
-)
-from mikasa_datasets.loaders import (
-    DatasetFormatError,
-    commit_output,
-    new_staging_dir,
-    npz_task_files,
-    output_action,
-    remove_stale_staging,
+    fix_image_stats,
+    prefetch,
+    write_in_parts,
+    write_part,
 )
 from mikasa_datasets.naming import env_id_to_dataset_name
 from mikasa_datasets.npz import EpisodeFormatError, read_episode, read_metadata
-from mikasa_datasets.rlds import ConversionResult
+from mikasa_datasets.rlds_format import import_tfds
 
 __all__ = [
     "EPISODES_PER_WORKER",
@@ -112,7 +115,7 @@ def write_lerobot(
     ``default_task``), as in the upstream converter. Returns ``(episodes, frames)``.
     """
     root = Path(root)
-    n_eps, n_frames, counts = _write_part(
+    n_eps, n_frames, counts = write_part(
         episodes,
         root,
         repo_id,
@@ -124,7 +127,7 @@ def write_lerobot(
         video_file_size_mb=VIDEO_FILE_SIZE_IN_MB,
         progress=progress,
     )
-    _fix_image_stats(root, counts, n_frames)
+    fix_image_stats(root, counts, n_frames)
     if source_metadata is not None and Path(source_metadata).is_file():
         shutil.copyfile(source_metadata, root / SOURCE_METADATA_NAME)
     return n_eps, n_frames
@@ -205,8 +208,8 @@ def _convert(
     report = None if progress is None else (lambda done: progress(done, num_episodes))
     try:
         if n_writers == 1:
-            n_eps, n_frames, counts = _write_part(
-                _prefetch(episodes(0, num_episodes)),
+            n_eps, n_frames, counts = write_part(
+                prefetch(episodes(0, num_episodes)),
                 staging,
                 repo_id,
                 progress=report,
@@ -215,10 +218,10 @@ def _convert(
         else:
             # Each share's instruction fallback starts from the default: a share cannot see
             # the instructions before it (the NPZ schema requires one in every episode).
-            n_eps, n_frames, counts = _write_in_parts(
+            n_eps, n_frames, counts = write_in_parts(
                 episodes, num_episodes, n_writers, staging, repo_id, write_kwargs, report
             )
-        _fix_image_stats(staging, counts, n_frames)
+        fix_image_stats(staging, counts, n_frames)
         if source_metadata is not None and source_metadata.is_file():
             shutil.copyfile(source_metadata, staging / SOURCE_METADATA_NAME)
         commit_output(staging, final)
@@ -306,13 +309,11 @@ def convert_rlds_to_lerobot(
     Corrupt shards raise an error naming the shard. Needs tensorflow and lerobot in one
     environment (``.venv-datasets``).
     """
-    from mikasa_datasets import rlds
-
-    rlds._tfds()  # import TF before lerobot's timer starts (see _convert)
-    vdir = rlds.find_version_dir(rlds_task_dir)
+    import_tfds()  # import TF before lerobot's timer starts (see _convert)
+    vdir = rlds_read.find_version_dir(rlds_task_dir)
     task_dir = vdir.parent  # <rlds_root>/<task>/<X.Y.Z>; <task> may be an env id (spec §8)
     info = json.loads((vdir / "dataset_info.json").read_text(encoding="utf-8"))
-    total = rlds._num_examples(info)
+    total = rlds_read.num_examples(info)
     n = total if max_episodes is None else min(total, max_episodes)
     meta_path = vdir / "metadata.json"
     env_id = task_dir.name
@@ -320,7 +321,7 @@ def convert_rlds_to_lerobot(
         env_id = str(json.loads(meta_path.read_text(encoding="utf-8")).get("env_id", env_id))
 
     def episodes(start: int, stop: int) -> Iterator[dict[str, np.ndarray]]:
-        return rlds.iter_episodes(vdir, start, stop)
+        return rlds_read.iter_episodes(vdir, start, stop)
 
     return _convert(
         episodes,

@@ -1,8 +1,8 @@
 """The LeRobot writer's parts (see :mod:`mikasa_datasets.lerobot_write`, whose public
 functions use them): writing episodes as one LeRobot dataset with lerobot's public API
-(`_write_part`), the exact camera statistics that replace lerobot's (`_fix_image_stats`),
-reading ahead in a thread (`_prefetch`), and the forked writer processes whose datasets
-lerobot's ``aggregate_datasets`` joins (`_write_in_parts`).
+(`write_part`), the exact camera statistics that replace lerobot's (`fix_image_stats`),
+reading ahead in a thread (`prefetch`), and the forked writer processes whose datasets
+lerobot's ``aggregate_datasets`` joins (`write_in_parts`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_datasets.lerobot import (
+from mikasa_datasets.lerobot_format import (
     ACTION_KEY,
     CAMERA_KEYS,
     DONE_KEY,
@@ -101,7 +101,7 @@ def _image_stats(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
     return out
 
 
-def _fix_image_stats(root: Path, counts: dict[str, np.ndarray], frames: int) -> None:
+def fix_image_stats(root: Path, counts: dict[str, np.ndarray], frames: int) -> None:
     """Replace the camera entries of ``root``'s ``meta/stats.json`` by `_image_stats`."""
     from lerobot.datasets.utils import load_stats, write_stats
 
@@ -114,7 +114,7 @@ def _fix_image_stats(root: Path, counts: dict[str, np.ndarray], frames: int) -> 
 
 
 # --------------------------------------------------------------------------- writing
-def _write_part(
+def write_part(
     episodes: Iterable[dict[str, np.ndarray]],
     root: Path,
     repo_id: str,
@@ -199,7 +199,7 @@ def _remove_empty_dirs(root: Path) -> None:
             path.rmdir()
 
 
-def _prefetch(items: Iterator[Any], depth: int = 3) -> Iterator[Any]:
+def prefetch(items: Iterator[Any], depth: int = 3) -> Iterator[Any]:
     """Yield from ``items`` while a background thread reads up to ``depth`` ahead.
 
     Reading an episode (NPZ CRC checks, RLDS record parsing and PNG decoding, which release
@@ -257,8 +257,8 @@ def _part_writer(
     LeRobot dataset at ``root``; report ``("episode", n)`` on ``conn`` after each and
     finally ``("done", (episodes, frames, counts))`` or ``("error", exception)``."""
     try:
-        written = _write_part(
-            _prefetch(episodes(start, stop)),
+        written = write_part(
+            prefetch(episodes(start, stop)),
             root,
             repo_id,
             progress=lambda n: conn.send(("episode", n)),
@@ -275,7 +275,7 @@ def _part_writer(
             conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}\n{where}")))
 
 
-def _write_in_parts(
+def write_in_parts(
     episodes: EpisodeRange,
     num_episodes: int,
     workers: int,

@@ -41,7 +41,7 @@ import numpy as np
 
 from mikasa_datasets.naming import env_id_to_dataset_name
 from mikasa_datasets.npz_read import (
-    _Archive,
+    NpzArchive,
     fast_zlib,  # noqa: F401 (re-exported: defined here before the split)
     is_rl_episode_file,
     read_episode,
@@ -65,7 +65,7 @@ from mikasa_datasets.npz_schema import (
     EpisodeFormatError,
     EpisodeInvariantError,
     KeySpec,
-    _check_in_memory,
+    check_in_memory,
     check_schema,
     make_episode,
     validate_episode,
@@ -270,7 +270,7 @@ def write_rl_episode(
     if validate:
         validate_rl_episode(episode, source=path)
     else:
-        _check_in_memory(episode, path, RL_SCHEMA)
+        check_in_memory(episode, path, RL_SCHEMA)
     arrays = {key: np.ascontiguousarray(episode[key]) for key in RL_EPISODE_KEYS}
     with _atomic_writer(path) as f:
         np.savez(f, **arrays)
@@ -313,7 +313,7 @@ def read_episode_summary(path: str | os.PathLike[str]) -> EpisodeSummary:
     full check.
     """
     path = Path(path)
-    archive = _Archive(path)
+    archive = NpzArchive(path)
     try:
         archive.checked_headers()
         small = {

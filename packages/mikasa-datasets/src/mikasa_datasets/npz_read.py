@@ -31,9 +31,9 @@ from mikasa_datasets.npz_schema import (
     Episode,
     EpisodeFormatError,
     KeySpec,
-    _check_array,
-    _check_keys,
-    _check_lengths,
+    check_array,
+    check_keys,
+    check_lengths,
     validate_episode,
     validate_rl_episode,
 )
@@ -92,7 +92,7 @@ def _array_from_npy_bytes(
     return arr.reshape(shape, order="F" if fortran_order else "C")
 
 
-class _Archive:
+class NpzArchive:
     """An NPZ file opened for schema-checked access; every error names the file.
 
     The file is read into memory once. Members stored uncompressed (``numpy.savez``, what
@@ -121,7 +121,7 @@ class _Archive:
         self._stored: dict[str, memoryview] = {}
         self._headers: dict[str, tuple[tuple[int, ...], bool, np.dtype, int]] = {}
         try:
-            _check_keys(list(self.members), path, schema)
+            check_keys(list(self.members), path, schema)
         except BaseException:
             self.close()
             raise
@@ -156,6 +156,7 @@ class _Archive:
         return self._headers[key]
 
     def header(self, key: str) -> tuple[tuple[int, ...], np.dtype]:
+        """(shape, dtype) of member ``key`` from its ``.npy`` header (data not read)."""
         try:
             payload = self._stored_bytes(key)
             if payload is not None:
@@ -170,6 +171,7 @@ class _Archive:
         return tuple(shape), dtype
 
     def array(self, key: str) -> np.ndarray:
+        """Member ``key`` as an array (CRC-checked; viewing the file's bytes when stored)."""
         try:
             payload = self._stored_bytes(key)
             if payload is not None:
@@ -196,13 +198,14 @@ class _Archive:
                     self.path,
                     f"key {key!r} holds Python objects (dtype {dtype}); expected {spec.dtype_text()}",
                 )
-            t = _check_array(key, dtype, shape, self.path, self.schema)
+            t = check_array(key, dtype, shape, self.path, self.schema)
             if t is not None:
                 lengths[key] = t
         length = int(self.array("episode_length")) if "episode_length" in self.schema else None
-        return _check_lengths(lengths, length, self.path)
+        return check_lengths(lengths, length, self.path)
 
     def close(self) -> None:
+        """Close the zip file (arrays already read stay valid)."""
         self.zf.close()
 
 
@@ -220,7 +223,7 @@ def read_episode(
     invariants are checked too (:func:`validate_episode`).
     """
     path = Path(path)
-    archive = _Archive(path)
+    archive = NpzArchive(path)
     try:
         archive.checked_headers()
         episode = {key: archive.array(key) for key in EPISODE_KEYS}
@@ -251,7 +254,7 @@ def read_rl_episode(
     """Load one RL episode file (:data:`RL_SCHEMA`), checking keys, dtypes and shapes
     (CRC-checked); with ``validate`` also :func:`validate_rl_episode`'s invariants."""
     path = Path(path)
-    archive = _Archive(path, RL_SCHEMA)
+    archive = NpzArchive(path, RL_SCHEMA)
     try:
         archive.checked_headers()
         episode = {key: archive.array(key) for key in RL_EPISODE_KEYS}
@@ -265,7 +268,7 @@ def read_rl_episode(
 def read_rl_episode_headers(path: str | os.PathLike[str]) -> int:
     """Check an RL episode file's keys, dtypes and shapes from the array headers only
     (frames not read); return its length ``T``."""
-    archive = _Archive(Path(path), RL_SCHEMA)
+    archive = NpzArchive(Path(path), RL_SCHEMA)
     try:
         return archive.checked_headers()
     finally:

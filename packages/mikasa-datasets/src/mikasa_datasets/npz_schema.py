@@ -167,7 +167,7 @@ class EpisodeInvariantError(EpisodeFormatError):
 
 
 # --------------------------------------------------------------------------- schema checks
-def _check_array(
+def check_array(
     key: str,
     dtype: np.dtype,
     shape: tuple[int, ...],
@@ -194,7 +194,8 @@ def _check_array(
     return int(shape[0]) if spec.per_step else None
 
 
-def _check_keys(keys: Sequence[str], source: Any, schema: Mapping[str, KeySpec] = SCHEMA) -> None:
+def check_keys(keys: Sequence[str], source: Any, schema: Mapping[str, KeySpec] = SCHEMA) -> None:
+    """Check that ``keys`` are exactly the schema's keys (none missing, none extra)."""
     missing = [k for k in schema if k not in keys]
     if missing:
         raise EpisodeFormatError(
@@ -206,7 +207,9 @@ def _check_keys(keys: Sequence[str], source: Any, schema: Mapping[str, KeySpec] 
         raise EpisodeFormatError(source, f"unexpected key(s) {', '.join(map(repr, extra))}")
 
 
-def _check_lengths(lengths: Mapping[str, int], episode_length: int | None, source: Any) -> int:
+def check_lengths(lengths: Mapping[str, int], episode_length: int | None, source: Any) -> int:
+    """Check that the per-step arrays' lengths agree with each other and with
+    ``episode_length`` (when given) and are at least 1; return that length ``T``."""
     distinct = set(lengths.values())
     if len(distinct) > 1:
         detail = ", ".join(f"{k}: {n}" for k, n in lengths.items())
@@ -232,11 +235,13 @@ def check_schema(
     :func:`make_episode` to build an episode from raw rollout data). ``source`` names the
     episode in error messages.
     """
-    return _check_in_memory(episode, source, SCHEMA)
+    return check_in_memory(episode, source, SCHEMA)
 
 
-def _check_in_memory(episode: Mapping[str, Any], source: Any, schema: Mapping[str, KeySpec]) -> int:
-    _check_keys(list(episode), source, schema)
+def check_in_memory(episode: Mapping[str, Any], source: Any, schema: Mapping[str, KeySpec]) -> int:
+    """Check keys, array types, dtypes and shapes of an in-memory episode against
+    ``schema`` (:data:`SCHEMA` or :data:`RL_SCHEMA`); return its length ``T``."""
+    check_keys(list(episode), source, schema)
     lengths: dict[str, int] = {}
     for key in schema:
         value = episode[key]
@@ -244,11 +249,11 @@ def _check_in_memory(episode: Mapping[str, Any], source: Any, schema: Mapping[st
             raise EpisodeFormatError(
                 source, f"key {key!r} is a {type(value).__name__}, expected a numpy array"
             )
-        t = _check_array(key, value.dtype, value.shape, source, schema)
+        t = check_array(key, value.dtype, value.shape, source, schema)
         if t is not None:
             lengths[key] = t
     length = int(episode["episode_length"]) if "episode_length" in schema else None
-    return _check_lengths(lengths, length, source)
+    return check_lengths(lengths, length, source)
 
 
 def validate_episode(
@@ -322,7 +327,7 @@ def validate_rl_episode(
     timeout); ``T <= max_episode_steps`` when given; float arrays are finite. Actions are
     not range-checked (a policy's raw actions may leave [-1, 1]; the controller clips).
     """
-    t = _check_in_memory(episode, source, RL_SCHEMA)
+    t = check_in_memory(episode, source, RL_SCHEMA)
 
     def fail(problem: str) -> None:
         raise EpisodeInvariantError(source, problem)

@@ -44,7 +44,8 @@ The code is split in three: :mod:`mikasa_datasets.rlds_format` (names, the lazy 
 import, the feature spec, the PNG codec, NPZ episode <-> TFDS example),
 :mod:`mikasa_datasets.rlds_read` (finding and reading the shards, episodes back in the NPZ
 schema) and this module (the TFDS builder and :func:`convert_npz_to_rlds`), which
-re-exports the names of the other two.
+re-exports the names of the other two and the converters' shared
+:class:`~mikasa_datasets.conversion.ConversionResult`.
 """
 
 from __future__ import annotations
@@ -56,11 +57,11 @@ import shutil
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mikasa_datasets.loaders import (
+from mikasa_datasets.conversion import (
+    ConversionResult,
     DatasetFormatError,
     commit_output,
     new_staging_dir,
@@ -81,19 +82,19 @@ from mikasa_datasets.rlds_format import (
     RLDS_VERSION,
     SPLIT,
     STATE_DIM,  # noqa: F401 (re-exported: defined here before the split)
-    _png_rows,  # noqa: F401 (re-exported: defined here before the split)
-    _tfds,
     decode_pngs,  # noqa: F401 (re-exported: defined here before the split)
     encode_png,
     episode_from_rlds,
     episode_to_rlds,
+    import_tfds,
+    png_rows,  # noqa: F401 (re-exported: defined here before the split)
     rlds_features,
 )
 from mikasa_datasets.rlds_read import (
-    _num_examples,
     find_version_dir,
     iter_episodes,
     iter_examples,
+    num_examples,
     read_tfrecords,  # noqa: F401 (re-exported: defined here before the split)
     shard_files,
 )
@@ -120,7 +121,7 @@ __all__ = [
 @functools.cache
 def _builder_class() -> type:
     """The ``mikasa_dataset`` GeneratorBasedBuilder (created once, not registered)."""
-    tfds = _tfds()
+    tfds = import_tfds()
 
     class MikasaDataset(tfds.core.GeneratorBasedBuilder, skip_registration=True):
         """MIKASA-Robo-VLA episodes as RLDS; examples come from ``example_source``."""
@@ -160,22 +161,6 @@ def _builder_class() -> type:
 
     assert MikasaDataset.name == BUILDER_NAME
     return MikasaDataset
-
-
-@dataclass
-class ConversionResult:
-    """What a conversion did: where, how much, how long; ``skipped`` under ``resume``."""
-
-    path: Path
-    episodes: int
-    frames: int
-    seconds: float
-    skipped: bool = False
-
-    @property
-    def frames_per_second(self) -> float:
-        """Converted frames per wall-clock second (0 when skipped)."""
-        return self.frames / self.seconds if self.seconds > 0 else 0.0
 
 
 def _example_from_file(item: tuple[int, Path, str]) -> tuple[int, dict, int]:
@@ -267,7 +252,7 @@ def convert_npz_to_rlds(
     def complete(existing: Path) -> bool:
         try:
             info = json.loads((find_version_dir(existing) / "dataset_info.json").read_text())
-            return _num_examples(info) == len(files)
+            return num_examples(info) == len(files)
         except (OSError, ValueError, KeyError, DatasetFormatError):
             return False
 
@@ -294,10 +279,10 @@ def convert_npz_to_rlds(
         builder = builder_class(example_source=source, data_dir=str(tfds_dir))
         builder.download_and_prepare(
             download_dir=str(tfds_dir / "downloads"),
-            download_config=_tfds().download.DownloadConfig(
+            download_config=import_tfds().download.DownloadConfig(
                 # One process, no Beam; max_examples_per_split honours nothing here (we
                 # already cut the file list) but keeps TFDS from computing extra stats.
-                compute_stats=_tfds().download.ComputeStatsMode.SKIP,
+                compute_stats=import_tfds().download.ComputeStatsMode.SKIP,
             ),
         )
         built = tfds_dir / BUILDER_NAME / RLDS_VERSION

@@ -2,7 +2,8 @@
 
 The pieces that both the NPZ -> RLDS export (:mod:`mikasa_datasets.rlds`) and the reader
 (:mod:`mikasa_datasets.rlds_read`) need: the dataset's names and version, the quiet lazy
-import of TensorFlow Datasets (``_tfds``; importing this module imports no TensorFlow),
+import of TensorFlow Datasets (:func:`import_tfds`; importing this module imports no
+TensorFlow),
 :func:`rlds_features` (the feature spec of the :mod:`mikasa_datasets.rlds` docstring), the
 PNG codec (:func:`encode_png`, :func:`decode_pngs`) and the mapping between an NPZ episode
 and a TFDS example (:func:`episode_to_rlds`, :func:`episode_from_rlds`). Import these names
@@ -20,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_datasets.loaders import require
+from mikasa_datasets.conversion import require
 from mikasa_datasets.npz import fast_zlib
 
 RLDS_DIRNAME = "data_rlds"
@@ -35,7 +36,7 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 # --------------------------------------------------------------------------- libraries
 @functools.cache
-def _tfds() -> Any:
+def import_tfds() -> Any:
     """tensorflow_datasets, imported quietly on first use (MissingDependencyError if absent)."""
     # TF logs a screenful of CPU-feature notes at import; keep errors only. The oneDNN
     # note ignores TF_CPP_MIN_LOG_LEVEL; oneDNN kernels only change float maths, which
@@ -58,7 +59,7 @@ def _tfds() -> Any:
 
 def rlds_features() -> Any:
     """The ``tfds.features.FeaturesDict`` of one RLDS episode (``rlds`` module docstring)."""
-    tfds = _tfds()
+    tfds = import_tfds()
     f = tfds.features
 
     def image() -> Any:
@@ -138,7 +139,7 @@ def encode_png(image: np.ndarray) -> bytes:
     return _PNG_SIGNATURE + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
 
 
-def _png_rows(data: bytes) -> tuple[np.ndarray, int, int] | None:
+def png_rows(data: bytes) -> tuple[np.ndarray, int, int] | None:
     """(filtered rows [H, W*3 + 1], H, W) of an 8-bit RGB non-interlaced PNG, chunk CRCs
     checked; None for any other kind of PNG (left to PIL)."""
     if data[:8] != _PNG_SIGNATURE:
@@ -180,7 +181,7 @@ def decode_pngs(images: list[bytes]) -> np.ndarray:
 
     out = []
     for data in images:
-        parsed = _png_rows(bytes(data))
+        parsed = png_rows(bytes(data))
         filters = None if parsed is None else parsed[0][:, 0]
         if parsed is None or np.any(filters > 1):
             with Image.open(io.BytesIO(data)) as image:
@@ -256,7 +257,7 @@ def episode_from_rlds(
     """Rebuild the NPZ-schema episode from stacked RLDS ``steps`` arrays and metadata."""
     obs = steps["observation"]
     instructions = steps["language_instruction"]
-    text = _text(instructions[0]) if len(instructions) else ""
+    text = as_text(instructions[0]) if len(instructions) else ""
     t = len(steps["reward"])
     return {
         "rgb": _join_cameras(obs["image"], obs["wrist_image"]),
@@ -272,5 +273,6 @@ def episode_from_rlds(
     }
 
 
-def _text(value: Any) -> str:
+def as_text(value: Any) -> str:
+    """A TFDS text value as ``str``: bytes decoded as UTF-8, anything else through ``str``."""
     return value.decode("utf-8") if isinstance(value, bytes) else str(value)

@@ -22,14 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_datasets.loaders import DatasetFormatError, require
+from mikasa_datasets.conversion import DatasetFormatError, require
 from mikasa_datasets.rlds_format import (
     BUILDER_NAME,
     SPLIT,
-    _text,
-    _tfds,
+    as_text,
     decode_pngs,
     episode_from_rlds,
+    import_tfds,
 )
 
 
@@ -43,7 +43,7 @@ def _shard_lengths(version_dir: Path) -> list[int]:
     raise DatasetFormatError(version_dir / "dataset_info.json", f"has no {SPLIT!r} split")
 
 
-def _num_examples(info: dict[str, Any]) -> int:
+def num_examples(info: dict[str, Any]) -> int:
     """Total number of examples of the ``train`` split in a dataset_info.json mapping."""
     for split in info.get("splits", []):
         if split.get("name") == SPLIT:
@@ -105,7 +105,7 @@ def iter_examples(
     DatasetFormatError naming its shard file; shards wholly before ``start`` are not read
     (dataset_info.json gives each shard's length).
     """
-    tfds = _tfds()
+    tfds = import_tfds()
     vdir = find_version_dir(path)
     try:
         features = tfds.features.FeaturesDict.from_config(str(vdir))
@@ -150,7 +150,7 @@ def iter_examples(
 
 def _png_observation_keys(steps_feature: Any) -> list[str]:
     """The step observations stored as uint8 PNG images."""
-    tfds = _tfds()
+    tfds = import_tfds()
     try:
         observation = steps_feature.feature["observation"]
         keys = list(observation.keys())
@@ -229,7 +229,7 @@ def _stack_steps(steps: list[dict[str, Any]], feature: Any) -> dict[str, Any]:
         if isinstance(first, dict):
             return {k: stack([v[k] for v in values]) for k in first}
         if isinstance(first, (bytes, str)):
-            return np.array([_text(v) for v in values])
+            return np.array([as_text(v) for v in values])
         return np.stack([np.asarray(v) for v in values]) if values else np.zeros((0,))
 
     if not steps:

@@ -21,7 +21,7 @@ checks keys, shapes, dtypes, counts and episode boundaries:
   ``frame_index``/``timestamp``/``episode_index``/``task_index``, 7-D finite
   state/action, and every video's frame count, size and time range per episode.
 
-The first problem found is raised as :class:`~mikasa_datasets.loaders.DatasetFormatError`
+The first problem found is raised as :class:`~mikasa_datasets.conversion.DatasetFormatError`
 (or the NPZ module's ``EpisodeFormatError``) whose message starts with the most specific
 file at fault. ``quick=True`` skips decoding frame data (image/video payloads).
 """
@@ -37,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_datasets.loaders import DatasetFormatError, detect_format, require
+from mikasa_datasets.conversion import DatasetFormatError, require
+from mikasa_datasets.loaders import detect_format
 from mikasa_datasets.npz import (
     METADATA_KEYS,
     EpisodeFormatError,
@@ -299,7 +300,7 @@ def validate_rlds(path: str | os.PathLike[str], *, quick: bool = False) -> Valid
     if total == 0:
         raise DatasetFormatError(info_path, "the train split has no episodes")
 
-    tfds = rlds._tfds()
+    tfds = rlds.import_tfds()
     features_path = vdir / "features.json"
     if not features_path.is_file():
         raise DatasetFormatError(features_path, "missing")
