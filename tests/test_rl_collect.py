@@ -169,12 +169,13 @@ def test_old_module_path_reports_bad_input(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
-def test_old_path_imports_without_the_collect_extra():
-    """A base install (no mikasa-oracles) still imports the old module (it re-exports
-    env_info); collecting then names the extra to install."""
+@pytest.mark.parametrize("missing", ["mikasa_oracles", "mikasa_datasets"])
+def test_old_path_imports_without_the_collect_extra(missing):
+    """A base install (no mikasa-oracles, or no mikasa-datasets) still imports the old module
+    (it re-exports env_info); collecting then names the extra to install."""
     code = (
         "import sys\n"
-        "sys.modules['mikasa_oracles'] = sys.modules['mikasa_oracles.collect'] = None\n"
+        f"sys.modules['{missing}'] = None\n"
         f"from {OLD_MODULE} import env_info, main\n"
         "assert env_info('ShellGameTouch-v0')[1] == 90\n"
         "sys.exit(main(['--env-id', 'RememberColor3-v0']))\n"

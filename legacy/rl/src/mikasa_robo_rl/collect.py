@@ -54,7 +54,16 @@ import numpy as np
 
 from mikasa_robo_rl.manifest import UnknownEnvIdError, get_rl_task
 
-try:  # the collect extra (mikasa-oracles): the VLA collector's pool, lock and errors
+try:  # the collect extra: the NPZ writer (mikasa-datasets); the VLA collector's pool, lock and errors
+    from mikasa_datasets.npz import (
+        EpisodeFormatError,
+        episode_file_name,
+        episode_index,
+        list_episode_files,
+        read_rl_episode_headers,
+        remove_stale_temp_files,
+        write_rl_episode,
+    )
     from mikasa_oracles.collect import (
         CollectError,
         CollectionFailed,
@@ -85,7 +94,8 @@ DEFAULT_NUM_TRAIN_DATA = 1000
 DEFAULT_BATCH_SIZE = 250
 PROG = "mikasa-rl-collect"
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-_NEEDS_EXTRA = 'mikasa-rl-collect needs mikasa-oracles: pip install "mikasa-robo-rl[collect]"'
+_NEEDS_EXTRA = ('mikasa-rl-collect needs mikasa-oracles and mikasa-datasets (the collect extra): '
+                'pip install "mikasa-robo-rl[collect]"')
 
 
 @cache
@@ -230,8 +240,6 @@ class _EpisodeRunner:
         return act
 
     def _run(self, n: int) -> EpisodeResult:
-        from mikasa_datasets.npz import episode_file_name, write_rl_episode
-
         self._ensure_envs()
         k, m = divmod(n, self.num_train_data)
         seed = episode_seed(m // self.batch_size, m % self.batch_size, self.batch_size)
@@ -284,15 +292,6 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 def _episodes_to_do(directory: Path, total: int, settings: dict[str, Any], summary: Path) -> list[int]:
     """Resume: check what ``directory`` holds (under the lock); the indices still missing."""
-    from mikasa_datasets.npz import (
-        EpisodeFormatError,
-        episode_file_name,
-        episode_index,
-        list_episode_files,
-        read_rl_episode_headers,
-        remove_stale_temp_files,
-    )
-
     remove_stale_temp_files(directory)  # a killed run's half-written files
     existing = list_episode_files(directory)
     if existing and episode_index(existing[-1]) >= total:
