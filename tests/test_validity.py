@@ -1,4 +1,4 @@
-"""Chance rates (`mikasa_bench.chance`) and the validity table generator (`mikasa_bench.validity`)."""
+"""Chance rates (`mikasa_bench.chance`) and the validity table generator (`mikasa_bench.results.validity`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,11 @@ import mikasa_envs
 import numpy as np
 import pytest
 from mani_skill.utils.registration import REGISTERED_ENVS
-from mikasa_bench import chance, validity
+from mikasa_bench import validity
 from mikasa_bench.chance import task_chance
-from mikasa_bench.leaks import LEAK_STATUSES, LEAKS
+from mikasa_bench.results.leaks import LEAK_STATUSES, LEAKS
+from mikasa_envs.tasks._batteries_checker import coupon_chance
+from mikasa_envs.tasks._trace_shape_chance import trace_shape_guess_rate
 
 
 def _cls(env_id: str) -> type:
@@ -27,55 +29,37 @@ def test_every_task_has_a_chance_rate_with_a_reason(env_id):
     assert 0.0 <= c.rate <= 1.0 and c.reason
 
 
-def test_chance_parameters_match_the_env_classes():
-    """The constants copied into mikasa_bench.chance are the envs' own."""
+def test_every_family_declares_a_chance_rule():
+    """The rule lives with the family (mikasa_envs.family.TaskFamily.chance)."""
+    from mikasa_envs.family import get_family
+
     for env_id in ALL_IDS:
-        family, cls = mikasa_envs.get_task(env_id).family, _cls(env_id)
-        if family.startswith(("remember", "find_imposter")):
-            n = getattr(cls, "SHAPES", None) if "shape" in family else cls.COLORS
-            assert chance._selection_candidates(env_id) == n, env_id
-        elif family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors"):
-            assert chance._sequence_length(env_id) == cls.SEQUENCE_LENGTH and cls.COLORS == chance.NUM_COLORS
-        elif family == "blink_count_button_press":
-            assert chance.BLINK_COUNT_RANGES[chance._variant(env_id, "BlinkCountButtonPress")] == cls.BLINK_COUNT_RANGE
-        elif family == "timed_transfer":
-            assert chance.TIMED_TRANSFER_DELAYS[chance._variant(env_id, "TimedTransfer")] == cls.DELAY_STEPS
-            assert cls.WINDOW_TOLERANCE == chance.TIMED_TRANSFER_TOLERANCE
-            assert cls.SIGNAL_STEP_RANGE == chance.TIMED_TRANSFER_SIGNAL_STEPS
-        elif family == "take_it_back":
-            assert cls.START_X == chance.TAKE_IT_BACK_START_X and cls.GOAL_RADIUS == chance.TAKE_IT_BACK_RADIUS
-            assert (cls.START_Y_STEP, cls.START_Y_JITTER) == (chance.TAKE_IT_BACK_ROW_STEP, chance.TAKE_IT_BACK_ROW_JITTER)
-        elif family.startswith("batteries_checker"):
-            assert f"-{cls.ACTIVE_BATTERIES}-VLA" in env_id
-        elif family == "trace_shape":
-            assert chance.TRACE_SHAPE_SETS[chance._variant(env_id, "TraceShape")] == cls.SHAPE_SET
-            assert cls.GREEN_CUBE_POSITION == chance.TRACE_SHAPE_CUBE_START
-        elif family == "trace_shape_seq":
-            assert chance.TRACE_SHAPE_SETS[chance._variant(env_id, "TraceShapeSeq")] == cls.SHAPE_SET
-            assert chance.TRACE_SHAPE_SEQ_LENGTHS == cls.SEQUENCE_LEN_RANGE
-            assert cls.GREEN_CUBE_POSITION == chance.TRACE_SHAPE_CUBE_START
+        assert get_family(mikasa_envs.get_task(env_id).family).chance is not None, env_id
 
 
 def test_trace_shape_chance_is_the_guess_rate_the_table_gives():
-    """The table's rates are what the Monte Carlo gives (fewer samples here: within 4 σ)."""
-    for variant in ("Easy", "Hard"):
-        rate = chance.trace_shape_guess_rate(chance.TRACE_SHAPE_SETS[variant], samples=4_000, seed=1)
-        expected = chance.TRACE_SHAPE_GUESS_RATES[variant]
+    """The variants' GUESS_RATE is what the Monte Carlo gives (fewer samples here: within 4 σ)."""
+    for env_id in ("TraceShapeEasy-VLA-v0", "TraceShapeHard-VLA-v0"):
+        cls = _cls(env_id)
+        rate = trace_shape_guess_rate(cls.SHAPE_SET, samples=4_000, seed=1, env=cls)
+        expected = cls.GUESS_RATE
         assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 4_000) ** 0.5)
-    assert task_chance("TraceShapeEasy-VLA-v0").rate == chance.TRACE_SHAPE_GUESS_RATES["Easy"]
-    expected = chance.TRACE_SHAPE_SEQ_GUESS_RATES["Easy"]
-    rate = chance.trace_shape_guess_rate((0,), samples=2_000, seed=1, lengths=chance.TRACE_SHAPE_SEQ_LENGTHS,
-                                         shapes_shown=True)
+        assert task_chance(env_id).rate == expected
+    cls = _cls("TraceShapeSeqEasy-VLA-v0")
+    expected = cls.GUESS_RATE
+    rate = trace_shape_guess_rate(cls.SHAPE_SET, samples=2_000, seed=1, lengths=cls.SEQUENCE_LEN_RANGE,
+                                  shapes_shown=True, env=cls)
     assert rate == pytest.approx(expected, abs=4 * (expected * (1 - expected) / 2_000) ** 0.5)
 
 
 def test_rotate_threshold_is_the_env_default():
     import inspect
 
-    from mikasa_envs.tasks._rotate import RotatePegVLABaseEnv
+    from mikasa_envs.tasks._rotate import ANGLE_THRESHOLD, RotatePegVLABaseEnv
 
     default = inspect.signature(RotatePegVLABaseEnv.__init__).parameters["angle_threshold"].default
-    assert default == chance.ROTATE_ANGLE_THRESHOLD
+    assert default == ANGLE_THRESHOLD
+    assert task_chance("RotateLenientPos-VLA-v0").rate == pytest.approx(ANGLE_THRESHOLD / math.pi)
 
 
 def test_closed_form_chances():
@@ -84,9 +68,9 @@ def test_closed_form_chances():
     assert task_chance("ChainOfColors5-VLA-v0").rate == pytest.approx(1 / 15120)
     assert task_chance("BlinkCountButtonPressMedium-Long-VLA-v0").rate == pytest.approx(1 / 11)
     assert task_chance("TimedTransferEasy-VLA-v0").rate == pytest.approx(11 / 108)
-    assert chance.coupon_chance(3, 3) == pytest.approx(2 / 9)
-    assert chance.coupon_chance(4, 3) == pytest.approx(0.0)
-    assert chance.coupon_chance(1, 5) == pytest.approx(1.0)
+    assert coupon_chance(3, 3) == pytest.approx(2 / 9)
+    assert coupon_chance(4, 3) == pytest.approx(0.0)
+    assert coupon_chance(1, 5) == pytest.approx(1.0)
 
 
 def test_take_it_back_chance_matches_a_simulation():
@@ -96,8 +80,9 @@ def test_take_it_back_chance_matches_a_simulation():
     y = 0.1 * rng.integers(-1, 2, n) + rng.uniform(0, 0.05, n)
     guess_y = 0.1 * rng.integers(-1, 2, n) + 0.025
     simulated = np.mean(np.hypot(x, y - guess_y) < 0.08)
-    assert chance.take_it_back_chance() == pytest.approx(simulated, abs=0.004)
-    assert 1 / 3 < chance.take_it_back_chance() < 0.36
+    rate = task_chance("TakeItBack-VLA-v0").rate
+    assert rate == pytest.approx(simulated, abs=0.004)
+    assert 1 / 3 < rate < 0.36
 
 
 def test_leaks_list_is_well_formed():

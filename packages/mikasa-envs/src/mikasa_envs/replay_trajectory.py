@@ -5,8 +5,15 @@ the arguments of ``python -m mani_skill.trajectory.replay_trajectory`` and runs 
 unchanged. ManiSkill's own entry point makes the env with ``gym.make(env_id)`` in an
 interpreter that has imported only ``mani_skill.envs``, where no MIKASA id is registered
 (it stops with "No registered env with id: ..."): this module registers them first, the VLA
-ids and, where mikasa-robo-rl is installed, the RL ids. The imports run at module level so
-that the worker processes ManiSkill spawns for ``--num-envs`` > 1 register them too.
+ids and those of every installed plugin. The registration runs at module level so that the
+worker processes ManiSkill spawns for ``--num-envs`` > 1 register them too.
+
+A plugin is an installed distribution that declares an entry point in the group
+``mikasa_envs.plugins`` naming a module whose import registers its env ids; mikasa-robo-rl
+declares ``rl = "mikasa_robo_rl"`` (the RL release's ids)::
+
+    [project.entry-points."mikasa_envs.plugins"]
+    rl = "mikasa_robo_rl"
 
 (ManiSkill's entry point also works on a trajectory whose .json names the env as
 ``"mikasa_envs:<id>"``: Gymnasium imports the module before it looks the id up.)
@@ -15,15 +22,33 @@ that the worker processes ManiSkill spawns for ``--num-envs`` > 1 register them 
 from __future__ import annotations
 
 import multiprocessing as mp
+import warnings
+from importlib.metadata import entry_points
+
+from mani_skill.trajectory import replay_trajectory
 
 import mikasa_envs  # noqa: F401  (registers the VLA ids)
 
-try:
-    import mikasa_robo_rl  # noqa: F401  (registers the RL ids)
-except ImportError:  # mikasa-robo-rl is a separate package
-    pass
+PLUGIN_GROUP = "mikasa_envs.plugins"
 
-from mani_skill.trajectory import replay_trajectory
+
+def load_plugins() -> list[str]:
+    """Import the module of every entry point in :data:`PLUGIN_GROUP` (registering its env
+    ids); returns the names of those loaded. A plugin that fails to load is skipped with a
+    warning, so that the VLA ids still replay."""
+    loaded = []
+    for entry_point in entry_points(group=PLUGIN_GROUP):
+        try:
+            entry_point.load()
+        except Exception as exc:  # a broken plugin must not stop the replay of other ids
+            warnings.warn(f"mikasa_envs plugin {entry_point.name!r} ({entry_point.value}) failed to load: {exc}",
+                          stacklevel=2)
+        else:
+            loaded.append(entry_point.name)
+    return loaded
+
+
+load_plugins()
 
 
 def main(argv: list[str] | None = None) -> None:

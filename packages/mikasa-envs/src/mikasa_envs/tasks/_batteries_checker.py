@@ -23,6 +23,7 @@ here before the split are re-exported.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import torch
@@ -43,6 +44,7 @@ from mikasa_envs.building_blocks.poses import (  # noqa: F401  (HIDE_OFFSET_Z, w
     write_actor_poses,
     zero_actor_velocities,
 )
+from mikasa_envs.family import Chance, TaskSpec
 from mikasa_envs.tasks._batteries_checker_layout import (  # noqa: F401  (all but slot_offsets: re-exported)
     GRASP_CANDIDATE_RADIUS,
     GRASP_MAX_ANGLE_DEG,
@@ -74,6 +76,7 @@ class BatteriesCheckerVLABaseEnv(
 
     # --- variant knobs
     ACTIVE_BATTERIES: ClassVar[int] = 3
+    CHECK_CYCLE_STEPS: ClassVar[int]  # the oracle's steps per check cycle (chance rule)
     WORKING_BATTERIES: ClassVar[int] = 1
 
     # --- stage machine
@@ -334,3 +337,20 @@ class BatteriesCheckerVLABaseEnv(
                 oracle_info=self.oracle_info,
             )
         return obs
+
+
+def coupon_chance(n: int, draws: int) -> float:
+    """P(``draws`` uniform picks among ``n`` items pick every item) (inclusion-exclusion)."""
+    return sum((-1) ** j * math.comb(n, j) * ((n - j) / n) ** draws for j in range(n + 1))
+
+
+def batteries_checker_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of the BatteriesChecker families (a checklist): the chance that check
+    cycles on uniformly drawn batteries cover all of them within the horizon."""
+    n = env_class.ACTIVE_BATTERIES
+    cycles = task.max_episode_steps // env_class.CHECK_CYCLE_STEPS
+    return Chance(
+        coupon_chance(n, cycles),
+        f"no discrete answer (a checklist): {cycles} check cycles fit the horizon; chance that "
+        f"cycles on uniformly drawn batteries cover all {n}",
+    )

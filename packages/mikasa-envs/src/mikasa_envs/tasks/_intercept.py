@@ -28,6 +28,7 @@ from mani_skill.utils.building import actors
 from mani_skill.utils.structs import Actor, Pose
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
+from mikasa_envs.family import Chance, TaskSpec
 
 BALL_RGBA = (1.0, 0.0, 0.0, 1.0)
 # Where the ball's visual twin waits while the ball is out of view: beyond every camera's far
@@ -220,3 +221,13 @@ class InterceptBallVLABaseEnv(MikasaVLABaseEnv):
 def uniform(n: int, lo: float, hi: float) -> torch.Tensor:
     """n draws of U[lo, hi) from torch's global RNG."""
     return torch.rand(n) * (hi - lo) + lo
+
+
+def intercept_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of Intercept and InterceptGrab: no discrete answer to guess."""
+    return Chance(
+        0.0,
+        "0: no discrete answer; the ball's start and launch velocity are continuous, and after "
+        "its first 10 frames it is out of view until touched, so meeting it without memory "
+        "takes a lucky guess of a continuous path",
+    )

@@ -23,6 +23,7 @@ from mani_skill.utils.structs import Actor, Pose
 
 from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cubes import rgba01
+from mikasa_envs.family import Chance, TaskSpec
 
 MODE_POS = "pos_angle"
 MODE_POS_NEG = "pos_neg_angle"
@@ -64,6 +65,9 @@ def target_degrees(task_cue: torch.Tensor) -> torch.Tensor:
     return torch.round(task_cue.float() * (180 / math.pi)).to(torch.int64)
 
 
+ANGLE_THRESHOLD = 0.1
+"""The default success tolerance (rad) on the final heading (``angle_threshold``)."""
+
 class RotatePegVLABaseEnv(MikasaVLABaseEnv):
     """Base of the Rotate families: turn a flat peg by the instructed angle about z.
 
@@ -93,7 +97,7 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
 
     peg: Actor
 
-    def __init__(self, *args: Any, angle_threshold: float = 0.1, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, angle_threshold: float = ANGLE_THRESHOLD, **kwargs: Any) -> None:
         # Both the success tolerance (rad) and the lower end of the target range.
         self.angle_threshold = float(angle_threshold)
         self.language_instruction: list[str] = []
@@ -212,3 +216,13 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
         """Success steps get the maximum; keep the debug terms (``info`` shows them a step late)."""
         self._reward_dict = reward_dict
         return torch.where(reward_dict["success"], torch.full_like(reward, self.DENSE_REWARD_MAX), reward)
+
+
+def rotate_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of the Rotate families: the success window's share of the start heading."""
+    t = ANGLE_THRESHOLD
+    return Chance(
+        t / math.pi,
+        f"{t}/π: no discrete answer; the unseen start heading is uniform in [0, 2π), and a "
+        f"guess succeeds within ±{t} rad of it",
+    )

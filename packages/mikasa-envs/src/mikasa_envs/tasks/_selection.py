@@ -33,6 +33,7 @@ from mikasa_envs.building_blocks.object_sets import (
 )
 from mikasa_envs.building_blocks.poses import set_cpu_actor_pose, write_actor_poses
 from mikasa_envs.building_blocks.shapes import SHAPE_AND_COLOR_SHAPES, SHAPE_SCALE
+from mikasa_envs.family import Chance, TaskSpec
 
 HIDDEN_Z = 1000.0
 # Which pinned layout a frame shows: the cue, everything hidden, the action layout; or free.
@@ -431,6 +432,11 @@ class ColorCubesMixin:
     COLORS: ClassVar[int] = 3
     CUBE_HALFSIZE: ClassVar[float] = CUBE_HALF_SIZE
 
+    @classmethod
+    def candidate_count(cls) -> int:
+        """N, the objects on the table in the action phase."""
+        return cls.COLORS
+
     def _load_objects(self) -> ObjectSet:
         objects = palette_cubes(self.scene, self.COLORS)
         self.color_dict = objects.descriptions
@@ -443,6 +449,11 @@ class BlueShapesMixin:
 
     SHAPES: ClassVar[int] = 3
     SHAPE_SCALE: ClassVar[float] = SHAPE_SCALE
+
+    @classmethod
+    def candidate_count(cls) -> int:
+        """N, the objects on the table in the action phase."""
+        return cls.SHAPES
 
     def _load_objects(self) -> ObjectSet:
         objects = blue_shapes(self.scene, self.SHAPES)
@@ -467,6 +478,11 @@ class ShapeAndColorMixin:
     QVEL_L2_COEF = 0.0
     SHAPES: ClassVar[int] = 6
     JITTER = staticmethod(jitter_best_of)
+
+    @classmethod
+    def candidate_count(cls) -> int:
+        """N, the objects on the table in the action phase."""
+        return cls.SHAPES
 
     def _load_objects(self) -> ObjectSet:
         objects = shape_color_objects(self.scene, self.SHAPES)
@@ -493,3 +509,13 @@ class ShapeAndColorMixin:
     def true_colors_info(self) -> torch.Tensor:
         """The answer's colour id, uint8 (B,)."""
         return self.oracle_info[:, 1]
+
+
+def selection_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of the six selection families: a uniform guess among the N objects on the
+    table in the action phase."""
+    n = env_class.candidate_count()
+    which = "find the imposter among" if issubclass(env_class, FindImposterVLABaseEnv) else (
+        "the shown one is one of"
+    )
+    return Chance(1 / n, f"1/{n}: {which} the {n} objects on the table in the action phase")

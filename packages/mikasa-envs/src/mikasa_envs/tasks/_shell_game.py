@@ -38,6 +38,7 @@ from mikasa_envs.base_env import MikasaVLABaseEnv
 from mikasa_envs.building_blocks.cups import build_mug, mug_rest_height
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import HIDE_OFFSET_Z, write_actor_poses
+from mikasa_envs.family import Chance, TaskSpec
 from mikasa_envs.tasks._shell_game_layout import (  # noqa: F401  (re-exported)
     BALL_COLORS,
     LAMP_BULBS,
@@ -513,3 +514,8 @@ class ColorLampShellGameVLABaseEnv(ScriptedShellGameVLABaseEnv):
         reward, terms = self.touch_reward(info)
         self._reward_dict = {**terms, "is_obj_placed": info["is_obj_placed"]}
         return reward
+
+
+def shell_game_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of the shell games: a uniform guess among the three mugs."""
+    return Chance(1 / 3, "1/3: the ball's mug is one of 3 mugs")

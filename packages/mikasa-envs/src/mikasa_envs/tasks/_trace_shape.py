@@ -99,7 +99,7 @@ def advance_latches(visited, checkpoint_dist, contour_dist, checkpoint_radius: f
     ``checkpoint_radius``, the others likewise once checkpoint 0 has. ``visited`` (..., 12)
     bool, ``checkpoint_dist`` (..., 12) and ``contour_dist`` (...) the cube's distances.
     Written with operators only, so torch tensors (the env) and numpy arrays (the guess-rate
-    Monte Carlo of ``mikasa_bench.chance``) go through the same rule."""
+    Monte Carlo of ``_trace_shape_chance``) go through the same rule."""
     visited = visited & ~(contour_dist > stray_radius)[..., None]
     near = checkpoint_dist < checkpoint_radius
     return visited | (near & (visited[..., :1] | near[..., :1]))

@@ -7,12 +7,14 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._batteries_checker import batteries_checker_chance
 from mikasa_envs.tasks.batteries_checker_hard import BatteriesCheckerHardVLABaseEnv
 
 FAMILY = TaskFamily(
     "batteries_checker_easy",
     overlays="batteries_checker",
     wrapper_table_rank=(27, 27),
+    chance=batteries_checker_chance,
 )
 
 
@@ -35,6 +37,9 @@ class BatteriesCheckerEasyVLABaseEnv(BatteriesCheckerHardVLABaseEnv):
         "Find all working batteries by inserting each one into the socket, observing the lamp result, "
         "and then pressing the button to confirm."
     )
+    # Env steps of one check cycle (pick, insert, press) of the oracle, measured (Easy-3 /
+    # Easy-6: 247-248 / 502-504 steps for 3 / 6 cycles; the memoryless oracle's took 79-88).
+    CHECK_CYCLE_STEPS = 84
 
     def _after_stage_update(self, pos: torch.Tensor) -> torch.Tensor:
         # Automatic return (batteries_checker_easy.md §3): on the insert step the battery goes

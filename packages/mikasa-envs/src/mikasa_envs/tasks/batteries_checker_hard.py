@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._batteries_checker import BatteriesCheckerVLABaseEnv
+from mikasa_envs.tasks._batteries_checker import (
+    BatteriesCheckerVLABaseEnv,
+    batteries_checker_chance,
+)
 
 FAMILY = TaskFamily(
     "batteries_checker_hard",
     overlays="batteries_checker",
     wrapper_table_rank=(28, 28),
+    chance=batteries_checker_chance,
 )
 
 
@@ -33,6 +37,9 @@ class BatteriesCheckerHardVLABaseEnv(BatteriesCheckerVLABaseEnv):
         "Find all working batteries by inserting each one into the socket, observing the lamp result, "
         "returning it from the socket to its initial slot, and then pressing the button to confirm."
     )
+    # Env steps of one check cycle (pick, insert, return, press) of the oracle, measured
+    # (Hard-3: 427-430 steps for 3 cycles); the chance rule counts the cycles that fit.
+    CHECK_CYCLE_STEPS = 143
 
 
 @register_task(FAMILY, "BatteriesCheckerHard-3-VLA-v0", number=46, split="long", data_source="MP",

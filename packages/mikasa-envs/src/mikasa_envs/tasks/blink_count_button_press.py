@@ -32,13 +32,22 @@ from mikasa_envs.building_blocks.buttons import (
 )
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import Chance, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
+
+
+def blink_count_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule: a uniform guess among the possible blink counts."""
+    lo, hi = env_class.BLINK_COUNT_RANGE
+    k = hi - lo + 1
+    return Chance(1 / k, f"1/{k}: the blink count is one of {lo}..{hi}")
+
 
 FAMILY = TaskFamily(
     "blink_count_button_press",
     overlays="blink_count",
     wrapper_table_rank=(29, 30),
+    chance=blink_count_chance,
 )
 
 

@@ -9,12 +9,13 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import ColorSequenceVLABaseEnv
+from mikasa_envs.tasks._color_sequence import ColorSequenceVLABaseEnv, color_set_chance
 
 FAMILY = TaskFamily(
     "bunch_of_colors",
     overlays="memory_capacity",
     wrapper_table_rank=(21, 22),
+    chance=color_set_chance,
 )
 
 

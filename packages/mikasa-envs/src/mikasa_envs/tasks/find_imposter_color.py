@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import ColorCubesMixin, FindImposterVLABaseEnv
+from mikasa_envs.tasks._selection import ColorCubesMixin, FindImposterVLABaseEnv, selection_chance
 
 FAMILY = TaskFamily(
     "find_imposter_color",
     overlays="color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(18, 18),
+    chance=selection_chance,
 )
 
 

@@ -5,13 +5,14 @@ from __future__ import annotations
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import BlueShapesMixin, FindImposterVLABaseEnv
+from mikasa_envs.tasks._selection import BlueShapesMixin, FindImposterVLABaseEnv, selection_chance
 
 FAMILY = TaskFamily(
     "find_imposter_shape",
     overlays="shape_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(19, 19),
+    chance=selection_chance,
 )
 
 

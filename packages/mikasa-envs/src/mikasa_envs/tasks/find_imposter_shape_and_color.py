@@ -5,13 +5,19 @@ from __future__ import annotations
 from mikasa_envs.building_blocks.shapes import SHAPE_SCALE
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import FindImposterVLABaseEnv, ShapeAndColorMixin, arc_slots
+from mikasa_envs.tasks._selection import (
+    FindImposterVLABaseEnv,
+    ShapeAndColorMixin,
+    arc_slots,
+    selection_chance,
+)
 
 FAMILY = TaskFamily(
     "find_imposter_shape_and_color",
     overlays="shape_color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(20, 20),
+    chance=selection_chance,
 )
 
 

@@ -13,14 +13,21 @@ from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube
 from mikasa_envs.building_blocks.discs import build_disc
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses, write_actor_poses
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import Chance, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._lamp_task import LampTaskVLABaseEnv, uniform
+
+
+def gather_and_recall_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule: a uniform guess among the three buttons."""
+    return Chance(1 / 3, "1/3: the flash colour is one of 3 buttons")
+
 
 FAMILY = TaskFamily(
     "gather_and_recall",
     overlays="step_reward",
     wrapper_table_rank=(35, 35),
+    chance=gather_and_recall_chance,
 )
 
 

@@ -9,12 +9,13 @@ import torch
 from mikasa_envs.building_blocks.targets import TARGET_Z, build_target_disc, set_disc_pose
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, uniform
+from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, intercept_chance, uniform
 
 FAMILY = TaskFamily(
     "intercept",
     overlays="intercept",
     wrapper_table_rank=(7, 7),
+    chance=intercept_chance,
 )
 
 

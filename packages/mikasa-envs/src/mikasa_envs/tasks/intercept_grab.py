@@ -8,12 +8,13 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv
+from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, intercept_chance
 
 FAMILY = TaskFamily(
     "intercept_grab",
     overlays="intercept",
     wrapper_table_rank=(8, 8),
+    chance=intercept_chance,
 )
 
 

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import ColorCubesMixin, RememberVLABaseEnv
+from mikasa_envs.tasks._selection import ColorCubesMixin, RememberVLABaseEnv, selection_chance
 
 FAMILY = TaskFamily(
     "remember_color",
     overlays="color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(12, 13),
+    chance=selection_chance,
 )
 
 

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import BlueShapesMixin, RememberVLABaseEnv
+from mikasa_envs.tasks._selection import BlueShapesMixin, RememberVLABaseEnv, selection_chance
 
 FAMILY = TaskFamily(
     "remember_shape",
     overlays="shape_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(14, 15),
+    chance=selection_chance,
 )
 
 

@@ -4,13 +4,19 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import RememberVLABaseEnv, ShapeAndColorMixin, arc_slots
+from mikasa_envs.tasks._selection import (
+    RememberVLABaseEnv,
+    ShapeAndColorMixin,
+    arc_slots,
+    selection_chance,
+)
 
 FAMILY = TaskFamily(
     "remember_shape_and_color",
     overlays="shape_color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(16, 17),
+    chance=selection_chance,
 )
 
 

@@ -8,12 +8,13 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv
+from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv, rotate_chance
 
 FAMILY = TaskFamily(
     "rotate_lenient",
     overlays="rotate",
     wrapper_table_rank=(9, 9),
+    chance=rotate_chance,
 )
 
 

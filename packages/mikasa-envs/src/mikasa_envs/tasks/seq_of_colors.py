@@ -6,12 +6,14 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
+from mikasa_envs.tasks._color_sequence import color_sequence_chance
 from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
 
 FAMILY = TaskFamily(
     "seq_of_colors",
     overlays="memory_capacity",
     wrapper_table_rank=(23, 24),
+    chance=color_sequence_chance,
 )
 
 

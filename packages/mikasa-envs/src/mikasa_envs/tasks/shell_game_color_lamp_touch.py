@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv
+from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv, shell_game_chance
 
 FAMILY = TaskFamily(
     "shell_game_color_lamp_touch",
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(4, 4),
+    chance=shell_game_chance,
 )
 
 

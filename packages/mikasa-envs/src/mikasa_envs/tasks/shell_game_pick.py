@@ -12,10 +12,12 @@ from mikasa_envs.tasks._shell_game import (
     MUG_QUAT_HANDLE_TOWARD_ROBOT,
     GoalSiteMixin,
     HiddenBallShellGameVLABaseEnv,
+    shell_game_chance,
 )
 
 FAMILY = TaskFamily(
     "shell_game_pick",
+    chance=shell_game_chance,
 )
 
 

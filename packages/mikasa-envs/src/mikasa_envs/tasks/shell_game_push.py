@@ -8,13 +8,18 @@ import torch
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import GoalSiteMixin, HiddenBallShellGameVLABaseEnv
+from mikasa_envs.tasks._shell_game import (
+    GoalSiteMixin,
+    HiddenBallShellGameVLABaseEnv,
+    shell_game_chance,
+)
 
 FAMILY = TaskFamily(
     "shell_game_push",
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(1, 1),
+    chance=shell_game_chance,
 )
 
 

@@ -5,13 +5,18 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import SHUFFLE_TASK_STATE, ColorLampShellGameVLABaseEnv
+from mikasa_envs.tasks._shell_game import (
+    SHUFFLE_TASK_STATE,
+    ColorLampShellGameVLABaseEnv,
+    shell_game_chance,
+)
 
 FAMILY = TaskFamily(
     "shell_game_shuffle_color_lamp_touch",
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(3, 6),
+    chance=shell_game_chance,
 )
 
 

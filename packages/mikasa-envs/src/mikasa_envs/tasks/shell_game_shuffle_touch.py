@@ -12,6 +12,7 @@ from mikasa_envs.tasks._shell_game import (
     RedBallMixin,
     ScriptedShellGameVLABaseEnv,
     TouchMugMixin,
+    shell_game_chance,
 )
 
 FAMILY = TaskFamily(
@@ -19,6 +20,7 @@ FAMILY = TaskFamily(
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(2, 5),
+    chance=shell_game_chance,
 )
 
 

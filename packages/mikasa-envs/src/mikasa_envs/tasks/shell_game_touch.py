@@ -4,13 +4,18 @@ from __future__ import annotations
 
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._shell_game import HiddenBallShellGameVLABaseEnv, TouchMugMixin
+from mikasa_envs.tasks._shell_game import (
+    HiddenBallShellGameVLABaseEnv,
+    TouchMugMixin,
+    shell_game_chance,
+)
 
 FAMILY = TaskFamily(
     "shell_game_touch",
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(0, 0),
+    chance=shell_game_chance,
 )
 
 

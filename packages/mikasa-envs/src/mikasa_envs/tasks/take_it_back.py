@@ -5,6 +5,7 @@ view tells which way the cube came."""
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,14 +22,43 @@ from mikasa_envs.building_blocks.targets import (
     build_target_disc,
     set_disc_pose,
 )
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import Chance, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._intercept import SMALL_SCENE_GPU_MEMORY
+
+
+def take_it_back_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule: P(a guessed row centre lies within the success radius of the true start).
+
+    The start is x ~ U[START_X), y = START_Y_STEP·j + U[0, START_Y_JITTER) with
+    j ~ U{−1, 0, 1}; the guess is (centre of START_X, START_Y_STEP·j' + START_Y_JITTER / 2)
+    with j' uniform. The guessed row always succeeds (its corners are 0.056 away); a
+    neighbouring row only where its near edge comes within the radius (a midpoint integral
+    over the row's y jitter).
+    """
+    x_lo, x_hi = env_class.START_X
+    width, jitter, r = x_hi - x_lo, env_class.START_Y_JITTER, env_class.GOAL_RADIUS
+    near = env_class.START_Y_STEP - jitter / 2  # y gap from a row centre to the next row's near edge
+    n = 20_000
+    share = 0.0
+    for i in range(n):
+        dy = near + (i + 0.5) / n * jitter
+        if dy < r:
+            share += min(2 * math.sqrt(r * r - dy * dy), width) / width
+    neighbour = share / n
+    mean_neighbours = 4 / 3  # rows −1 and 1 have one neighbour, row 0 two
+    return Chance(
+        (1 + mean_neighbours * neighbour) / 3,
+        "≈1/3: the start is in one of 3 rows; a guess at a row's centre is within the "
+        f"{r} radius of every start of that row (and of a sliver of a neighbouring row)",
+    )
+
 
 FAMILY = TaskFamily(
     "take_it_back",
     overlays="intercept",
     wrapper_table_rank=(11, 11),
+    chance=take_it_back_chance,
 )
 
 

@@ -16,14 +16,38 @@ from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE, build_colored_cube
 from mikasa_envs.building_blocks.discs import build_disc
 from mikasa_envs.building_blocks.lamps import ColorSwitchLamp
 from mikasa_envs.building_blocks.poses import positions_to_poses, write_actor_poses
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import Chance, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._lamp_task import LampTaskVLABaseEnv, uniform
+
+
+def timed_transfer_window(env_class: type) -> tuple[float, int, int]:
+    """(chance, window width, steps up to the window's end) of a variant: the best a policy
+    without a clock gets by descending with a constant probability per step."""
+    delay = env_class.DELAY_STEPS
+    lo = int((1 - env_class.WINDOW_TOLERANCE) * delay)
+    hi = int((1 + env_class.WINDOW_TOLERANCE) * delay)
+    signal = sum(env_class.SIGNAL_STEP_RANGE) / 2
+    width = hi - lo + 1
+    end = signal + hi + 1
+    return width / end, width, int(end)
+
+
+def timed_transfer_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule: the window's share of the steps up to its end."""
+    rate, width, end = timed_transfer_window(env_class)
+    return Chance(
+        rate,
+        f"{width}/{end}: no discrete answer (a time); the window's share of the steps up to "
+        f"its end bounds a clockless policy that descends with a constant probability per step",
+    )
+
 
 FAMILY = TaskFamily(
     "timed_transfer",
     overlays="timed_transfer",
     wrapper_table_rank=(33, 34),
+    chance=timed_transfer_chance,
 )
 
 

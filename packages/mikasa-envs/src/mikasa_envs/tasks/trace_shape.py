@@ -15,11 +15,13 @@ from mikasa_envs.tasks._trace_shape import (
     SHAPE_TRIANGLE,
     TraceShapeCommonVLABaseEnv,
 )
+from mikasa_envs.tasks._trace_shape_chance import trace_shape_chance
 
 FAMILY = TaskFamily(
     "trace_shape",
     overlays="trace_shape",
     wrapper_table_rank=(31, 31),
+    chance=trace_shape_chance,
 )
 
 
@@ -140,6 +142,8 @@ class TraceShapeEasyVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles only."""
 
     SHAPE_SET = (SHAPE_CIRCLE,)
+    # trace_shape_guess_rate(SHAPE_SET) (50,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0589
 
 
 @register_task(FAMILY, "TraceShapeMedium-VLA-v0", number=75, split="medium", data_source="MP",
@@ -148,6 +152,8 @@ class TraceShapeMediumVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles and squares."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE)
+    # trace_shape_guess_rate(SHAPE_SET) (50,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0301
 
 
 @register_task(FAMILY, "TraceShapeHard-VLA-v0", number=76, split="medium", data_source="MP",
@@ -156,3 +162,5 @@ class TraceShapeHardVLAEnv(TraceShapeVLABaseEnv):
     """TraceShape with circles, squares and triangles."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE, SHAPE_TRIANGLE)
+    # trace_shape_guess_rate(SHAPE_SET) (50,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0168

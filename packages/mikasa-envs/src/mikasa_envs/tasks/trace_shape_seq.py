@@ -23,11 +23,13 @@ from mikasa_envs.tasks._trace_shape import (
     SHAPE_TRIANGLE,
     TraceShapeCommonVLABaseEnv,
 )
+from mikasa_envs.tasks._trace_shape_chance import trace_shape_chance
 
 FAMILY = TaskFamily(
     "trace_shape_seq",
     overlays="trace_shape",
     wrapper_table_rank=(32, 32),
+    chance=trace_shape_chance,
 )
 
 
@@ -307,6 +309,9 @@ class TraceShapeSeqEasyVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles only."""
 
     SHAPE_SET = (SHAPE_CIRCLE,)
+    # trace_shape_guess_rate(SHAPE_SET, lengths=SEQUENCE_LEN_RANGE, shapes_shown=True)
+    # (30,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0242
 
 
 @register_task(FAMILY, "TraceShapeSeqMedium-VLA-v0", number=78, split="long", data_source="MP",
@@ -315,6 +320,9 @@ class TraceShapeSeqMediumVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles and squares."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE)
+    # trace_shape_guess_rate(SHAPE_SET, lengths=SEQUENCE_LEN_RANGE, shapes_shown=True)
+    # (30,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0083
 
 
 @register_task(FAMILY, "TraceShapeSeqHard-VLA-v0", number=79, split="long", data_source="MP",
@@ -323,3 +331,6 @@ class TraceShapeSeqHardVLAEnv(TraceShapeSeqVLABaseEnv):
     """TraceShapeSeq with circles, squares and triangles."""
 
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE, SHAPE_TRIANGLE)
+    # trace_shape_guess_rate(SHAPE_SET, lengths=SEQUENCE_LEN_RANGE, shapes_shown=True)
+    # (30,000 samples, seed 0): the chance rule's rate.
+    GUESS_RATE = 0.0056
