@@ -9,6 +9,7 @@ import csv
 import io
 import json
 
+import mikasa_envs
 import numpy as np
 import pytest
 import torch
@@ -30,12 +31,11 @@ from mikasa_bench.metrics import (
 )
 from mikasa_bench.policies import PolicySpec, RandomPolicy, ZeroPolicy, resolve_policy
 from mikasa_bench.protocol import BenchmarkConfig
-from mikasa_bench.results import build_summary
+from mikasa_bench.results.summary import build_summary
 from mikasa_bench.runner import evaluate_benchmark
 from mikasa_bench.tasks import (
     MANIFEST_HEADER,
     BenchmarkTask,
-    default_task_csv_path,
     load_benchmark_tasks,
     manifest_csv_text,
     resolve_tasks,
@@ -66,13 +66,15 @@ def test_protocol_constants_and_seeds():
         BenchmarkConfig(start_seed=-1)
 
 
-def test_shipped_manifest_matches_mikasa_envs_and_parses():
-    path = default_task_csv_path()
-    assert path.name == "mikasa_robo_vla_envs.csv"
-    assert path.read_text(encoding="utf-8") == manifest_csv_text()
-    header = next(csv.reader(io.StringIO(path.read_text(encoding="utf-8")), delimiter=";"))
+def test_manifest_is_mikasa_envs_and_its_csv_round_trips(tmp_path):
+    text = manifest_csv_text()
+    header = next(csv.reader(io.StringIO(text), delimiter=";"))
     assert tuple(header) == MANIFEST_HEADER
     tasks = load_benchmark_tasks()
+    assert [t.env_id for t in tasks] == [t.env_id for t in mikasa_envs.list_tasks(split="all")]
+    path = tmp_path / "manifest.csv"
+    path.write_text(text, encoding="utf-8")
+    assert load_benchmark_tasks(path) == tasks
     assert len(tasks) == 90
     counts = {s: sum(t.split == s for t in tasks) for s in ("short", "medium", "long")}
     assert counts == {"short": 38, "medium": 30, "long": 22}

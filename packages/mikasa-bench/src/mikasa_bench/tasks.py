@@ -1,10 +1,11 @@
 """Task manifest and task selection (benchmark.md §2, §4).
 
-The package ships the upstream-format manifest ``mikasa_robo_vla_envs.csv``
-(semicolon-delimited) generated from `mikasa_envs.manifest`; every function that reads it
-accepts ``csv_path`` to use another file. Registration checks (is the id registered with
-Gymnasium in this installation?) live here too: a manifest passed with ``csv_path`` may
-name ids that no installed package registers.
+The benchmark's tasks are the rows of `mikasa_envs.manifest` (each family registers its own);
+every function that reads them accepts ``csv_path``, a manifest in the upstream format
+(semicolon-delimited, `MANIFEST_HEADER`; ``python -m mikasa_bench.tasks`` prints ours), to
+run another task list. Registration checks (is the id registered with Gymnasium in this
+installation?) live here too: a manifest passed with ``csv_path`` may name ids that no
+installed package registers.
 """
 
 from __future__ import annotations
@@ -17,15 +18,15 @@ import sys
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from datetime import datetime
-from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from mikasa_envs.manifest import list_tasks
 
 from .errors import BenchError, UnknownTaskError
 from .protocol import SUPPORTED_SPLITS
 
 __all__ = [
-    "MANIFEST_FILENAME",
     "MANIFEST_HEADER",
     "BenchmarkTask",
     "TaskSelection",
@@ -34,13 +35,11 @@ __all__ = [
     "resolve_tasks",
     "registered_env_ids",
     "repository_root",
-    "default_task_csv_path",
     "make_run_dir",
     "benchmark_commit",
     "manifest_csv_text",
 ]
 
-MANIFEST_FILENAME = "mikasa_robo_vla_envs.csv"
 MANIFEST_HEADER: tuple[str, ...] = (
     "id",
     "Name",
@@ -107,18 +106,9 @@ def repository_root() -> Path:
     return here.parent
 
 
-def default_task_csv_path() -> Path:
-    """The manifest shipped with the package (package data)."""
-    return Path(str(resources.files("mikasa_bench").joinpath("data", MANIFEST_FILENAME)))
-
-
 def manifest_csv_text() -> str:
-    """The upstream-format manifest generated from `mikasa_envs.manifest` (canonical rows).
-
-    Used to (re)generate the shipped file; a test checks that the two agree.
-    """
-    from mikasa_envs.manifest import list_tasks
-
+    """The canonical rows of `mikasa_envs.manifest` in the upstream format (``;``-delimited,
+    `MANIFEST_HEADER`), the format ``csv_path`` accepts."""
     buf = io.StringIO()
     writer = csv.writer(buf, delimiter=";", lineterminator="\n")
     writer.writerow(MANIFEST_HEADER)
@@ -138,8 +128,20 @@ def manifest_csv_text() -> str:
 
 
 def load_benchmark_tasks(csv_path: str | Path | None = None) -> list[BenchmarkTask]:
-    """All manifest rows in file order (``csv_path`` overrides the shipped manifest)."""
-    path = Path(csv_path) if csv_path is not None else default_task_csv_path()
+    """All canonical manifest rows in manifest order (``csv_path``: those of that file)."""
+    if csv_path is None:
+        return [
+            BenchmarkTask(
+                env_id=t.env_id,
+                split=t.split or "",
+                memory_type=t.memory_type,
+                max_episode_steps=t.max_episode_steps,
+                language_instruction=t.language_instruction,
+                data_source=t.data_source or "",
+            )
+            for t in list_tasks(split="all")
+        ]
+    path = Path(csv_path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -326,18 +328,9 @@ def resolve_tasks(
     return TaskSelection(out, env_ids=ids)
 
 
-def _main(argv: list[str] | None = None) -> int:
-    """``python -m mikasa_bench.tasks --write``: regenerate the shipped manifest."""
-    import argparse
-
-    parser = argparse.ArgumentParser(description=_main.__doc__)
-    parser.add_argument("--write", action="store_true", help="overwrite the shipped manifest")
-    args = parser.parse_args(argv)
-    text = manifest_csv_text()
-    if args.write:
-        default_task_csv_path().write_text(text, encoding="utf-8")
-    else:
-        sys.stdout.write(text)
+def _main() -> int:
+    """``python -m mikasa_bench.tasks``: print the manifest in the upstream format."""
+    sys.stdout.write(manifest_csv_text())
     return 0
 
 
