@@ -50,7 +50,7 @@ from mikasa_envs.tasks._batteries_checker_layout import (  # noqa: F401  (all bu
     GRASP_MAX_ANGLE_DEG,
     GRASP_MIN_FORCE,
     YAW_90_QUAT,
-    _material,
+    flat_material,
     slot_offsets,
 )
 from mikasa_envs.tasks._batteries_checker_mixins import (

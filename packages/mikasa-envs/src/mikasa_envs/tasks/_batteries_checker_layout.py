@@ -18,7 +18,8 @@ GRASP_MAX_ANGLE_DEG = 85.0
 GRASP_CANDIDATE_RADIUS = 0.12
 
 
-def _material(rgba: tuple[int, ...]) -> sapien.render.RenderMaterial:
+def flat_material(rgba: tuple[int, ...]) -> sapien.render.RenderMaterial:
+    """A plain render material of colour ``rgba`` (0-255)."""
     return sapien.render.RenderMaterial(base_color=list(rgba01(rgba)))
 
 

@@ -22,7 +22,7 @@ from mikasa_envs.building_blocks.poses import (
     write_actor_poses,
     zero_actor_velocities,
 )
-from mikasa_envs.tasks._batteries_checker_layout import YAW_90_QUAT, _material, slot_offsets
+from mikasa_envs.tasks._batteries_checker_layout import YAW_90_QUAT, flat_material, slot_offsets
 
 
 class BatteriesCheckerSceneMixin:
@@ -33,8 +33,8 @@ class BatteriesCheckerSceneMixin:
     def _build_tray(self) -> Actor:
         """Visual-only tray box with a dark disc on top at each slot (local frame, before the yaw)."""
         builder = self.scene.create_actor_builder()
-        builder.add_box_visual(half_size=self.TRAY_HALF_SIZE, material=_material(self.TRAY_RGBA))
-        disc_material = _material(self.SLOT_DISC_RGBA)
+        builder.add_box_visual(half_size=self.TRAY_HALF_SIZE, material=flat_material(self.TRAY_RGBA))
+        disc_material = flat_material(self.SLOT_DISC_RGBA)
         disc_z = self.TRAY_HALF_SIZE[2] + self.SLOT_DISC_HALF_HEIGHT
         for dx, dy in slot_offsets(self.MAX_BATTERIES):
             # World offset (dx, dy) in the tray frame turned by +90°: local (dy, −dx).
@@ -60,12 +60,12 @@ class BatteriesCheckerSceneMixin:
         for side in (-1.0, 1.0):
             builder.add_box_collision(pose=sapien.Pose(p=[side * (hole + wall_x), 0, 0]), half_size=[wall_x, hy, hz])
             builder.add_box_collision(pose=sapien.Pose(p=[0, side * (hole + wall_y), 0]), half_size=[hole, wall_y, hz])
-        builder.add_box_visual(half_size=[hx, hy, hz], material=_material(self.SOCKET_RGBA))
+        builder.add_box_visual(half_size=[hx, hy, hz], material=flat_material(self.SOCKET_RGBA))
         builder.add_cylinder_visual(
             pose=sapien.Pose(p=[0, 0, hz + 0.0005], q=UPRIGHT_CYLINDER_QUAT),
             radius=self.SOCKET_HOLE_DISC_RADIUS,
             half_length=0.0005,
-            material=_material(self.SOCKET_HOLE_RGBA),
+            material=flat_material(self.SOCKET_HOLE_RGBA),
         )
         builder.initial_pose = sapien.Pose(p=[0, 0, HIDE_OFFSET_Z])
         return builder.build_kinematic(name="socket")
@@ -79,7 +79,7 @@ class BatteriesCheckerSceneMixin:
             radius=self.BATTERY_RADIUS, half_length=self.BATTERY_HALF_HEIGHT, material=material
         )
         builder.add_cylinder_visual(
-            radius=self.BATTERY_RADIUS, half_length=self.BATTERY_HALF_HEIGHT, material=_material(self.BATTERY_RGBA)
+            radius=self.BATTERY_RADIUS, half_length=self.BATTERY_HALF_HEIGHT, material=flat_material(self.BATTERY_RGBA)
         )
         builder.initial_pose = sapien.Pose(p=[0, 0.05 * k, HIDE_OFFSET_Z], q=self.BATTERY_QUAT)
         if k < self.ACTIVE_BATTERIES:

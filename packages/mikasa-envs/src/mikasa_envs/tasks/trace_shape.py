@@ -9,11 +9,17 @@ import torch
 from mikasa_envs.family import TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._trace_shape import (
+    BULB_GREEN,
+    BULB_RED,
+    CHECKPOINT_STRIDE,
+    NUM_CHECKPOINTS,
     NUM_WAYPOINTS,
     SHAPE_CIRCLE,
     SHAPE_SQUARE,
     SHAPE_TRIANGLE,
     TraceShapeCommonVLABaseEnv,
+    checkpoints_of,
+    shape_waypoints,
 )
 from mikasa_envs.tasks._trace_shape_chance import trace_shape_chance
 
@@ -164,3 +170,25 @@ class TraceShapeHardVLAEnv(TraceShapeVLABaseEnv):
     SHAPE_SET = (SHAPE_CIRCLE, SHAPE_SQUARE, SHAPE_TRIANGLE)
     # trace_shape_guess_rate(SHAPE_SET) (50,000 samples, seed 0): the chance rule's rate.
     GUESS_RATE = 0.0168
+
+
+# The shape geometry the family's oracle and tools need, public here (``_trace_shape`` is the
+# two trace families' private base).
+__all__ = [
+    "BULB_GREEN",
+    "BULB_RED",
+    "CHECKPOINT_STRIDE",
+    "NUM_CHECKPOINTS",
+    "NUM_WAYPOINTS",
+    "SHAPE_CIRCLE",
+    "SHAPE_SQUARE",
+    "SHAPE_TRIANGLE",
+    "TraceShapeCommonVLABaseEnv",
+    "checkpoints_of",
+    "shape_waypoints",
+    "FAMILY",
+    "TraceShapeVLABaseEnv",
+    "TraceShapeEasyVLAEnv",
+    "TraceShapeMediumVLAEnv",
+    "TraceShapeHardVLAEnv",
+]
