@@ -35,9 +35,9 @@ def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
 
     logging.getLogger("mani_skill ").setLevel(logging.ERROR)  # ManiSkill's logger name
     from mikasa_bench.episode import make_benchmark_env, run_episode
+    from mikasa_bench.media.render import check_render_device
     from mikasa_bench.policies import ZeroPolicy
     from mikasa_bench.protocol import BenchmarkConfig, starts_scene
-    from mikasa_bench.render import check_render_device
 
     import_s = time.perf_counter() - t_start
     config = BenchmarkConfig(
@@ -102,7 +102,7 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
     from mikasa_bench.executor import EpisodeOutcome, Executor, make_executor
     from mikasa_bench.policies import resolve_policy
     from mikasa_bench.protocol import BenchmarkConfig
-    from mikasa_bench.results import RunStore
+    from mikasa_bench.results.store import RunStore
     from mikasa_bench.runner import execute_runs
     from mikasa_bench.tasks import resolve_tasks
 

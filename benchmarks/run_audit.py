@@ -26,7 +26,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.results import JOURNAL_FILENAME, META_DIRNAME, RUN_META_FILENAME
+from mikasa_bench.results.files import JOURNAL_FILENAME, META_DIRNAME, RUN_META_FILENAME
 
 
 def _journal(path: Path) -> tuple[list[dict[str, Any]], int]:

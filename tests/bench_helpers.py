@@ -12,8 +12,8 @@ import torch
 from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.policies import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig
-from mikasa_bench.results import (
-    RunStore,
+from mikasa_bench.results.store import RunStore
+from mikasa_bench.results.summary import (
     build_summary,
     build_task_result,
     write_benchmark_results,

@@ -23,14 +23,15 @@ from mikasa_bench.executor import (
     render_config,
     worker_env_vars,
 )
+from mikasa_bench.media.render import LAVAPIPE_ICD_ENV, gym_render_kwargs, worker_environment
+from mikasa_bench.media.video import EpisodeVideo, compose_frame
 from mikasa_bench.policies import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig, protocol_settings
-from mikasa_bench.render import LAVAPIPE_ICD_ENV, gym_render_kwargs, worker_environment
-from mikasa_bench.report import write_report
-from mikasa_bench.results import RunStore, load_run
+from mikasa_bench.results.report import write_report
+from mikasa_bench.results.run_data import load_run
+from mikasa_bench.results.store import RunStore
 from mikasa_bench.runner import execute_runs
 from mikasa_bench.tasks import BenchmarkTask
-from mikasa_bench.video import EpisodeVideo, compose_frame
 
 TASK = BenchmarkTask("RememberColor3-VLA-v0", "short", "Object", 25, "", "PPO")
 
@@ -235,7 +236,7 @@ def test_cli_video_and_render_options_are_run_defining(tmp_path, capsys):
 
 
 def test_video_paths_follow_the_spec():
-    from mikasa_bench.video import video_relpath
+    from mikasa_bench.media.video import video_relpath
 
     assert (
         video_relpath("RememberColor3-VLA-v0", 7) == "videos/RememberColor3-VLA-v0/episode_0007.mp4"

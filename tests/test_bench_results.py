@@ -10,12 +10,13 @@ from pathlib import Path
 import pytest
 from bench_helpers import FakeEnv, _result, _store, _task, _write_run
 from mikasa_bench import cli
-from mikasa_bench.compare import compare_runs
 from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.errors import BenchError
 from mikasa_bench.executor import InlineExecutor, _Scheduler
-from mikasa_bench.report import REPORT_HTML, REPORT_MD, write_report
-from mikasa_bench.results import RunStore, load_run
+from mikasa_bench.results.compare import compare_runs
+from mikasa_bench.results.report import REPORT_HTML, REPORT_MD, write_report
+from mikasa_bench.results.run_data import load_run
+from mikasa_bench.results.store import RunStore
 from mikasa_bench.runner import _jobs_for
 
 # --------------------------------------------------------------------------------------

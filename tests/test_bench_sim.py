@@ -19,7 +19,7 @@ import torch
 from mikasa_bench import cli
 from mikasa_bench.policies import resolve_policy
 from mikasa_bench.protocol import BenchmarkConfig
-from mikasa_bench.results import RunStore
+from mikasa_bench.results.store import RunStore
 from mikasa_bench.tasks import resolve_tasks
 
 TASK = "RememberColor3-VLA-v0"
@@ -244,7 +244,7 @@ def test_video_env_observes_and_scores_like_the_canonical_env():
     """The video chain (render_mode rgb_array + overlays, render() before every step)
     gives bit-identical rgb observations, proprio and rewards."""
     from mikasa_bench.episode import make_benchmark_env
-    from mikasa_bench.video import compose_frame
+    from mikasa_bench.media.video import compose_frame
 
     plain = make_benchmark_env(TASK, BenchmarkConfig(n_episodes=1, sim_backend="cpu"))
     video = make_benchmark_env(

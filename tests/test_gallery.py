@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mikasa_bench.cli import main
-from mikasa_bench.gallery import FrameRecorder, compose_gallery_frame
+from mikasa_bench.media.gallery import FrameRecorder, compose_gallery_frame
 from PIL import Image, ImageSequence
 
 TASKS = ("RememberColor3-VLA-v0", "ShellGameTouch-VLA-v0")

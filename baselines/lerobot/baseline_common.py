@@ -1,7 +1,7 @@
 """What every part of the LeRobot baseline driver shares: paths, logging, files, the clock,
 and running one command until it exits or the call's time limit stops it.
 
-Standard library plus ``mikasa_bench.results.atomic_write_json`` (a light import: it loads
+Standard library plus ``mikasa_bench.results.files.atomic_write_json`` (a light import: it loads
 neither the simulator nor torch).
 """
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.results import atomic_write_json as write_json
+from mikasa_bench.results.files import atomic_write_json as write_json
 
 __all__ = [
     "REPO",

@@ -7,7 +7,7 @@ GREEN_CUBE_OFFSET, where it rests until grasped) instead of guessed from the pri
 
 With the cube about the centre (GREEN_CUBE_POSITION None) it passed 10/10 and 7/10; with the
 cube at its fixed spot (the default since DEVIATIONS.md Fixed #27) 1/10 and 0/10
-(mikasa_bench.leaks).
+(mikasa_bench.results.leaks).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ checkpoint of every element, in order, by brute force.
 
 It passed TraceShapeSeq Easy/Medium/Hard 6, 5, 5 of 10 and TraceShape Easy/Medium/Hard 0, 0, 2
 of 10; since a trace must start at checkpoint 0 and stay within 6 cm of the contour
-(DEVIATIONS.md Fixed #28), 0 of 10 on all six (mikasa_bench.leaks).
+(DEVIATIONS.md Fixed #28), 0 of 10 on all six (mikasa_bench.results.leaks).
 """
 
 from __future__ import annotations

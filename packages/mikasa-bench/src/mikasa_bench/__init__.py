@@ -42,19 +42,13 @@ from .protocol import (
     WRAPPER_CHAIN,
     BenchmarkConfig,
 )
-from .results import (
-    RunData,
-    RunStore,
-    build_summary,
-    build_task_result,
-    load_run,
-    write_benchmark_results,
-)
+from .results.run_data import RunData, load_run
+from .results.store import RunStore
+from .results.summary import build_summary, build_task_result, write_benchmark_results
 from .runner import evaluate_benchmark, evaluate_task, execute_runs
 from .tasks import (
     BenchmarkTask,
     benchmark_commit,
-    default_task_csv_path,
     load_benchmark_tasks,
     make_run_dir,
     repository_root,
@@ -77,7 +71,6 @@ __all__ = [
     "load_benchmark_tasks",
     "select_benchmark_tasks",
     "resolve_tasks",
-    "default_task_csv_path",
     "repository_root",
     "make_run_dir",
     "benchmark_commit",

@@ -13,6 +13,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from mikasa_bench.media.gallery import add_gallery_parser, run_gallery  # noqa: F401  (re-exported)
+from mikasa_bench.results.validity import add_validity_parser, run_validity  # noqa: F401  (re-exported)
+
 from .cli_commands import _cmd_compare, _cmd_list, _cmd_report, _cmd_serve
 from .cli_parser import (  # noqa: F401  (re-exported)
     DEFAULT_SIM_BACKEND,
@@ -37,7 +40,6 @@ from .cli_run import (  # noqa: F401  (re-exported)
     _resume_hint,
 )
 from .errors import BenchError
-from .gallery import add_gallery_parser, run_gallery  # noqa: F401  (re-exported)
 from .protocol import (  # noqa: F401  (re-exported)
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,
@@ -49,7 +51,6 @@ from .protocol import (  # noqa: F401  (re-exported)
     SUPPORTED_SPLITS,
     BenchmarkConfig,
 )
-from .validity import add_validity_parser, run_validity  # noqa: F401  (re-exported)
 
 __all__ = ["main", "build_parser", "QUICKSTART_TASKS", "QUICKSTART_POLICIES"]
 

@@ -17,7 +17,8 @@ from .errors import BenchError
 def _cmd_list(args: argparse.Namespace) -> int:
     from mikasa_oracles import has_oracle
 
-    from .report import _format_rows
+    from mikasa_bench.results.text import format_rows
+
     from .tasks import registered_env_ids, select_benchmark_tasks
 
     tasks = select_benchmark_tasks(split=args.split)
@@ -45,7 +46,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
             ]
         )
     print(
-        _format_rows(
+        format_rows(
             ["Env id", "Split", "Memory type", "Max steps", "Registered", "Oracle"], rows, right={3}
         )
     )
@@ -60,9 +61,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from mikasa_bench.results.report import text_table, write_report
+    from mikasa_bench.results.run_data import load_run
+
     from .reference import is_reference
-    from .report import text_table, write_report
-    from .results import load_run
 
     if not args.out and any(is_reference(d) for d in args.dirs):
         raise BenchError("reference result sets are read-only: give --out DIR for the report")
@@ -85,8 +87,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .compare import compare_runs, format_comparison
-    from .results import load_run
+    from mikasa_bench.results.compare import compare_runs, format_comparison
+    from mikasa_bench.results.run_data import load_run
 
     a, b = load_run(args.dir_a), load_run(args.dir_b)
     if a.label == b.label:

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import argparse
 
-from .gallery import add_gallery_parser
+from mikasa_bench.media.gallery import add_gallery_parser
+from mikasa_bench.results.validity import add_validity_parser
+
 from .protocol import (
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,
@@ -17,7 +19,6 @@ from .protocol import (
     SUPPORTED_OBS_MODES,
     SUPPORTED_SPLITS,
 )
-from .validity import add_validity_parser
 
 QUICKSTART_TASKS: tuple[str, ...] = (
     "RememberColor3-VLA-v0",

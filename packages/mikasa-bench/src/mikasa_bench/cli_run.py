@@ -76,7 +76,7 @@ def _config(args: argparse.Namespace) -> BenchmarkConfig:
 
 
 def _resume_dirs(path: str) -> list[Path]:
-    from .results import META_DIRNAME, RUN_META_FILENAME
+    from mikasa_bench.results.files import META_DIRNAME, RUN_META_FILENAME
 
     root = Path(path)
     if (root / META_DIRNAME / RUN_META_FILENAME).is_file():
@@ -132,8 +132,9 @@ def _execute_and_report(
     report: bool = True,
     executor: Any = None,
 ) -> int:
-    from .report import text_table, write_report
-    from .results import load_run
+    from mikasa_bench.results.report import text_table, write_report
+    from mikasa_bench.results.run_data import load_run
+
     from .runner import execute_runs
 
     executor = executor if executor is not None else _executor_from(args)
@@ -190,8 +191,9 @@ def _resume_hint(stores: Sequence[Any]) -> str:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from mikasa_bench.results.store import RunStore
+
     from .policies import check_policy_supports, resolve_policy
-    from .results import RunStore
     from .tasks import benchmark_commit, make_run_dir, resolve_tasks
 
     executor = _executor_from(args)
@@ -255,8 +257,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
+    from mikasa_bench.results.store import RunStore
+
     from .policies import resolve_policy
-    from .results import RunStore
     from .tasks import benchmark_commit, resolve_tasks
 
     if args.episodes < 1:

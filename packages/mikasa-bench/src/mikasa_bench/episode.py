@@ -237,7 +237,7 @@ def run_episode(
     if frames is not None:
         sink = frames.append if frame_sink is None else _tee(frames.append, frame_sink)
     if sink is not None:
-        from .video import compose_frame
+        from mikasa_bench.media.video import compose_frame
 
     queue: deque[Any] = deque()
     chunk_sizes: set[int] = set()
@@ -312,14 +312,14 @@ def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> An
     observations), as upstream. ``config.render_device`` picks ManiSkill's render backend
     (executors pass each worker its own device); to render on the CPU on a GPU machine the
     process must also have restricted Vulkan to lavapipe before its first env (see
-    `mikasa_bench.render`).
+    `mikasa_bench.media.render`).
     ``obs_mode="state"`` (non-canonical) uses `_state_chain` instead, which needs no
     rendering unless videos are saved.
     """
     import gymnasium as gym
     import mikasa_envs  # noqa: F401  (registers the envs)
 
-    from .render import gym_render_kwargs
+    from mikasa_bench.media.render import gym_render_kwargs
 
     config = config or BenchmarkConfig()
     rgb = config.obs_mode == OBS_MODE

@@ -17,7 +17,7 @@ seed order, so the numbers never depend on the executor or the worker count.
 Every worker renders where the run's config says (`BenchmarkConfig.render_device_for` its
 index: a mixed pool gives the first N workers the GPU); the environment a worker needs for
 that (lavapipe-only Vulkan, lavapipe threads) is set when the worker starts, before
-Vulkan is initialised (`mikasa_bench.render`). With ``save_videos`` a worker encodes each
+Vulkan is initialised (`mikasa_bench.media.render`). With ``save_videos`` a worker encodes each
 episode's mp4 and sends the bytes back with the result: the runner writes the file before
 it journals the episode, so a recorded episode always has its video, also with Ray
 workers on other machines.
@@ -38,11 +38,12 @@ from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
+from mikasa_bench.media.render import apply_environment, check_render_device, worker_environment
+
 from .episode import EpisodeResult, RecordedActions, make_benchmark_env, run_episode
 from .errors import BenchError, EpisodeInterrupted
 from .policies import PolicySpec, build_policy, policy_chunk_size
 from .protocol import BenchmarkConfig, scene_start, starts_scene
-from .render import apply_environment, check_render_device, worker_environment
 from .tasks import BenchmarkTask
 
 __all__ = [
@@ -220,7 +221,7 @@ class _EpisodeWorker:
             try:
                 if not job.config.save_videos:
                     return self._play(job, job.episode, env, policy), None, restarts
-                from .video import EpisodeVideo
+                from mikasa_bench.media.video import EpisodeVideo
 
                 with EpisodeVideo() as recorder:
                     result = self._play(job, job.episode, env, policy, frame_sink=recorder.add)

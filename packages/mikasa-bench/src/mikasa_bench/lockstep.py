@@ -45,6 +45,8 @@ from typing import Any
 
 import numpy as np
 
+from mikasa_bench.media.render import apply_environment
+
 from .episode import (
     EpisodeResult,
     first_value,
@@ -63,7 +65,6 @@ from .executor import (
 )
 from .policies import build_policy, policy_chunk_size, reset_policy
 from .protocol import EPISODES_PER_SCENE, BenchmarkConfig
-from .render import apply_environment
 
 __all__ = ["LockstepExecutor", "split_action_batch", "scene_groups"]
 

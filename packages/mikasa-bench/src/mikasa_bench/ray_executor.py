@@ -36,6 +36,8 @@ from mikasa_envs.ray_actors import (
     wait_until_ready,
 )
 
+from mikasa_bench.media.render import apply_environment, worker_environment
+
 from .errors import BenchError
 from .executor import (
     EpisodeJob,
@@ -45,7 +47,6 @@ from .executor import (
     _Scheduler,
     render_config,
 )
-from .render import apply_environment, worker_environment
 
 __all__ = ["RayExecutor", "import_ray"]
 

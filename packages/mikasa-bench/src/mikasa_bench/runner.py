@@ -17,18 +17,19 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from mikasa_bench.results.files import atomic_write_bytes
+from mikasa_bench.results.store import RunStore
+from mikasa_bench.results.summary import (
+    build_summary,
+    build_task_result,
+    write_benchmark_results,
+)
+
 from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import EpisodeFailedError
 from .executor import EpisodeJob, Executor
 from .policies import policy_chunk_size
 from .protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
-from .results import (
-    RunStore,
-    _atomic_write_bytes,
-    build_summary,
-    build_task_result,
-    write_benchmark_results,
-)
 from .tasks import BenchmarkTask, benchmark_commit
 
 __all__ = ["execute_runs", "evaluate_task", "evaluate_benchmark"]
@@ -162,14 +163,14 @@ def evaluate_task(
         episodes = []
         for i, seed in enumerate(config.episode_seeds()):
             if video_dir is not None:
-                from .video import EpisodeVideo
+                from mikasa_bench.media.video import EpisodeVideo
 
                 with EpisodeVideo() as recorder:
                     result, _ = run_episode(
                         env, policy, seed, frame_sink=recorder.add, fresh_scene=starts_scene(i)
                     )
                     data = recorder.finish()
-                _atomic_write_bytes(Path(video_dir) / f"episode_{i:04d}.mp4", data)
+                atomic_write_bytes(Path(video_dir) / f"episode_{i:04d}.mp4", data)
             else:
                 result, _ = run_episode(env, policy, seed, fresh_scene=starts_scene(i))
             episodes.append(result)

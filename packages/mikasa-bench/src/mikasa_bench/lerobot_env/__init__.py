@@ -173,8 +173,12 @@ class MikasaLeRobotEnv(gym.Env):
         import torch
 
         from mikasa_bench.episode import make_benchmark_env
+        from mikasa_bench.media.render import (
+            apply_environment,
+            check_render_device,
+            worker_environment,
+        )
         from mikasa_bench.protocol import BenchmarkConfig
-        from mikasa_bench.render import apply_environment, check_render_device, worker_environment
 
         # As mikasa-bench's workers: restrict Vulkan to lavapipe before the first env of
         # the process when rendering on the CPU is asked for (no-op otherwise).

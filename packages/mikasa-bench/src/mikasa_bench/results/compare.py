@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 from statistics import NormalDist
 from typing import Any
 
-from .metrics import newcombe_difference_interval
-from .report import _format_rows, _pct
-from .results import RunData
+from mikasa_bench.metrics import newcombe_difference_interval
+from mikasa_bench.results.run_data import RunData
+from mikasa_bench.results.text import format_percent, format_rows
 
 __all__ = ["TaskDelta", "Comparison", "compare_runs", "format_comparison"]
 
@@ -134,8 +134,8 @@ def format_comparison(comp: Comparison) -> str:
     rows: list[list[Any]] = [
         [
             d.env_id,
-            f"{_pct(d.sr_a)} (n={d.n_a})",
-            f"{_pct(d.sr_b)} (n={d.n_b})",
+            f"{format_percent(d.sr_a)} (n={d.n_a})",
+            f"{format_percent(d.sr_b)} (n={d.n_b})",
             f"{100 * d.delta:+.0f} pp",
             f"[{100 * d.lower:+.0f}, {100 * d.upper:+.0f}] pp",
             f"{d.return_b - d.return_a:+.2f}",
@@ -145,7 +145,7 @@ def format_comparison(comp: Comparison) -> str:
     ]
     lines = []
     if rows:
-        lines.append(_format_rows(header, rows, right={3, 5}))
+        lines.append(format_rows(header, rows, right={3, 5}))
     else:
         lines.append("no task appears in both runs")
     for title, ids in (("only in A", comp.only_a), ("only in B", comp.only_b)):

@@ -10,7 +10,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .results import _atomic_write_bytes
+from mikasa_bench.results.files import atomic_write_bytes
 
 __all__ = ["write_index"]
 
@@ -99,4 +99,4 @@ def write_index(
         "<p id='image-status' data-loaded='0' data-total='0'>Loading animations...</p>"
         f"{sections}<script>{_CHECK_SCRIPT}</script></body></html>\n"
     )
-    _atomic_write_bytes(path, page.encode("utf-8"))
+    atomic_write_bytes(path, page.encode("utf-8"))

@@ -37,7 +37,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import BenchError
+from mikasa_bench.errors import BenchError
 
 __all__ = [
     "LAVAPIPE_ICD_ENV",

@@ -14,14 +14,15 @@ from __future__ import annotations
 import base64
 import html
 import io
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .metrics import aggregate_by, wilson_interval
-from .results import RunData
+from mikasa_bench.metrics import aggregate_by, wilson_interval
+from mikasa_bench.results.files import atomic_write_bytes
+from mikasa_bench.results.run_data import RunData
+from mikasa_bench.results.text import format_percent, format_rows
 
 __all__ = ["text_table", "write_report", "REPORT_MD", "REPORT_HTML", "ASSETS_DIR"]
 
@@ -39,10 +40,6 @@ def _ci(r: dict[str, Any]) -> tuple[float, float]:
 def _mean_len(r: dict[str, Any]) -> float:
     lengths = r.get("episode_lengths") or []
     return sum(lengths) / len(lengths) if lengths else float("nan")
-
-
-def _pct(x: float) -> str:
-    return "—" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.0f}%"
 
 
 def _task_order(runs: Sequence[RunData]) -> list[str]:
@@ -73,20 +70,6 @@ def _overall(run: RunData) -> float:
 # ------------------------------------------------------------------------------------
 
 
-def _format_rows(header: Sequence[str], rows: Sequence[Sequence[str]], right: set[int]) -> str:
-    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows, strict=False)]
-
-    def fmt(row: Sequence[str]) -> str:
-        cells = [
-            str(c).rjust(w) if i in right else str(c).ljust(w)
-            for i, (c, w) in enumerate(zip(row, widths, strict=False))
-        ]
-        return "  ".join(cells).rstrip()
-
-    sep = "  ".join("-" * w for w in widths)
-    return "\n".join([fmt(header), sep, *(fmt(r) for r in rows)])
-
-
 def text_table(runs: Sequence[RunData]) -> str:
     """The per-task results of every run plus per-split / per-memory-type / overall means."""
     header = ["Task", "Split", "Memory", "Policy", "SR", "95% CI", "Return", "Length", "Eps"]
@@ -96,11 +79,11 @@ def text_table(runs: Sequence[RunData]) -> str:
     for i in range(1, len(rows)):
         if ids[i] == ids[i - 1]:
             rows[i][:3] = ["", "", ""]
-    out = [_format_rows(header, rows, right={4, 6, 7, 8})]
+    out = [format_rows(header, rows, right={4, 6, 7, 8})]
     agg_rows = _group_cells(runs, titles=("split", "memory"))
-    agg_rows.append(["overall (mean task SR)", *[_pct(_overall(run)) for run in runs]])
+    agg_rows.append(["overall (mean task SR)", *[format_percent(_overall(run)) for run in runs]])
     agg_header = ["Group", *[run.label for run in runs]]
-    out.append(_format_rows(agg_header, agg_rows, right=set(range(1, len(runs) + 1))))
+    out.append(format_rows(agg_header, agg_rows, right=set(range(1, len(runs) + 1))))
     return "\n\n".join(out)
 
 
@@ -120,8 +103,8 @@ def _task_cells(runs: Sequence[RunData], *, ci: str) -> list[list[str]]:
                     r["split"],
                     r["memory_type"],
                     run.label,
-                    _pct(float(r["sr"])),
-                    ci.format(lo=_pct(lo), hi=_pct(hi)),
+                    format_percent(float(r["sr"])),
+                    ci.format(lo=format_percent(lo), hi=format_percent(hi)),
                     f"{float(r['mean_return']):.2f}",
                     f"{_mean_len(r):.1f}",
                     str(len(r["successes"])),
@@ -140,7 +123,7 @@ def _group_cells(runs: Sequence[RunData], *, titles: tuple[str, str]) -> list[li
         for a in aggs:
             keys.update(dict.fromkeys(a[kind]))
         for k in keys:
-            rows.append([f"{title}: {k}", *[_pct(a[kind].get(k, float("nan"))) for a in aggs]])
+            rows.append([f"{title}: {k}", *[format_percent(a[kind].get(k, float("nan"))) for a in aggs]])
     return rows
 
 
@@ -196,7 +179,7 @@ def _plots(runs: Sequence[RunData]) -> dict[str, bytes]:
                 color=colors[i % len(colors)],
             )
             # Value labels: a 0 % bar is otherwise invisible.
-            ax.bar_label(bars, labels=[_pct(v / 100) for v in vals], fontsize=7, padding=1)
+            ax.bar_label(bars, labels=[format_percent(v / 100) for v in vals], fontsize=7, padding=1)
         ax.set_xticks(
             x,
             names,
@@ -238,7 +221,7 @@ def _plots(runs: Sequence[RunData]) -> dict[str, bytes]:
             color=colors[i % len(colors)],
             error_kw={"elinewidth": 0.8, "alpha": 0.7},
         )
-        ax.bar_label(bars, labels=[_pct(v / 100) for v in vals], fontsize=7, padding=2)
+        ax.bar_label(bars, labels=[format_percent(v / 100) for v in vals], fontsize=7, padding=2)
     ax.set_yticks(y, tasks, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlim(0, 112)
@@ -367,7 +350,7 @@ def _task_rows(runs: Sequence[RunData]) -> tuple[list[str], list[list[str]]]:
 def _agg_rows(runs: Sequence[RunData]) -> tuple[list[str], list[list[str]]]:
     header = ["Group", *[run.label for run in runs]]
     rows = _group_cells(runs, titles=("Split", "Memory type"))
-    rows.append(["**Overall (mean task SR)**", *[f"**{_pct(_overall(run))}**" for run in runs]])
+    rows.append(["**Overall (mean task SR)**", *[f"**{format_percent(_overall(run))}**" for run in runs]])
     return header, rows
 
 
@@ -528,8 +511,6 @@ def write_report(
 ) -> tuple[Path, Path]:
     """Write ``report.md`` (+ ``report_assets/*.png``) and the self-contained
     ``report.html`` into ``out_dir``; returns both paths."""
-    from .results import _atomic_write_bytes
-
     if not runs:
         raise ValueError("no runs to report")
     out = Path(out_dir)
@@ -540,9 +521,9 @@ def write_report(
     )
     images = _plots(runs)
     for name, data in images.items():
-        _atomic_write_bytes(out / ASSETS_DIR / name, data)
+        atomic_write_bytes(out / ASSETS_DIR / name, data)
     md_path, html_path = out / REPORT_MD, out / REPORT_HTML
     videos = _video_rows(runs, out)
-    _atomic_write_bytes(md_path, _markdown(runs, title, ASSETS_DIR, videos).encode("utf-8"))
-    _atomic_write_bytes(html_path, _html(runs, title, images, videos).encode("utf-8"))
+    atomic_write_bytes(md_path, _markdown(runs, title, ASSETS_DIR, videos).encode("utf-8"))
+    atomic_write_bytes(html_path, _html(runs, title, images, videos).encode("utf-8"))
     return md_path, html_path

@@ -1,214 +1,48 @@
-"""Result files: per-task JSON, summary.json, the run store with its episode journal.
+"""The run store: all state of one run directory and the only writer of its files.
 
-Layout of a run directory::
-
-    <run_dir>/<env_id>.json        per-task result (benchmark.md §7.1 keys, then extensions)
-    <run_dir>/summary.json         summary of the finished tasks (§7.2 keys, then extensions)
-    <run_dir>/meta/run.json        what the run is: tasks, policy, protocol, sessions
-    <run_dir>/meta/episodes.jsonl  journal: one line per finished episode (fsync'ed)
-    <run_dir>/videos/<env_id>/episode_<i:04d>.mp4   with ``save_videos`` (written before
-                                   the episode's journal line)
-
-Every JSON file is replaced atomically (temp file + ``os.replace``), so a reader never
-sees half a file. The journal makes ``--resume`` lossless even after ``kill -9``: episodes
-of unfinished tasks are recovered from it, a torn last line is dropped, and an episode
-already recorded is never run again.
+`RunStore` creates a run directory (or reopens one to resume it), journals every finished
+episode (``meta/episodes.jsonl``, fsync'ed), writes a task's result file when its last
+episode is in and rewrites the summary; file names and layout: `mikasa_bench.results.files`.
+The journal makes ``--resume`` lossless even after ``kill -9``: episodes of unfinished
+tasks are recovered from it, a torn last line is dropped, and an episode already recorded
+is never run again.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
-import tempfile
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from .episode import EpisodeResult
-from .errors import BenchError
-from .metrics import aggregate_by, summarize_task_results, wilson_interval
-from .policies import PolicySpec
-from .protocol import NUM_ENVS, BenchmarkConfig, package_versions, protocol_settings
-from .tasks import BenchmarkTask
+from mikasa_bench.episode import EpisodeResult
+from mikasa_bench.errors import BenchError
+from mikasa_bench.media.video import video_relpath
+from mikasa_bench.policies import PolicySpec
+from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings
+from mikasa_bench.results.files import (
+    JOURNAL_FILENAME,
+    META_DIRNAME,
+    RUN_META_FILENAME,
+    SUMMARY_FILENAME,
+    atomic_write_bytes,
+    atomic_write_json,
+    read_json,
+)
+from mikasa_bench.results.summary import build_summary, build_task_result
+from mikasa_bench.tasks import BenchmarkTask
 
-__all__ = [
-    "SUMMARY_FILENAME",
-    "META_DIRNAME",
-    "atomic_write_json",
-    "build_task_result",
-    "build_summary",
-    "write_benchmark_results",
-    "RunStore",
-    "RunData",
-    "load_run",
-]
+__all__ = ["RunStore", "RUN_FORMAT"]
 
-SUMMARY_FILENAME = "summary.json"
-META_DIRNAME = "meta"
-RUN_META_FILENAME = "run.json"
-JOURNAL_FILENAME = "episodes.jsonl"
 RUN_FORMAT = "mikasa-bench-run/1"
 
 
 def _now() -> str:
     return datetime.now(timezone.utc).astimezone().isoformat(timespec="seconds")
-
-
-def _json_safe(x: Any) -> Any:
-    """NaN/inf are not JSON: write them as null."""
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    return x
-
-
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _current_umask()
-
-
-def _atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` via a temp file in the same directory, fsync, then ``os.replace``:
-    readers (and a crash at any point) see the old file or the new one, never a mix."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # The temp name starts with '.' and ends in '.tmp': globs for *.json never see it.
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        # mkstemp creates 0600; results and videos get the usual umask-based mode so
-        # others can read a shared results directory.
-        os.fchmod(fd, 0o666 & ~_UMASK)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def atomic_write_json(path: str | Path, data: Any) -> None:
-    """Write ``data`` atomically as indented UTF-8 JSON (keys in insertion order, trailing
-    newline; NaN/inf become null)."""
-    text = json.dumps(_json_safe(data), indent=2, ensure_ascii=False) + "\n"
-    _atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def build_task_result(
-    task: BenchmarkTask,
-    config: BenchmarkConfig,
-    episodes: Sequence[EpisodeResult],
-    *,
-    action_chunk_size: int = 1,
-    model: Mapping[str, Any] | None = None,
-    commit: str | None = None,
-    wall_time_s: float | None = None,
-    videos: Sequence[str | None] | None = None,
-    restarts: Sequence[int] | None = None,
-) -> dict[str, Any]:
-    """The per-task result dict: the keys of benchmark.md §7.1 in order, then extensions
-    (``sr_ci95``, ``mean_episode_length``, the remaining protocol settings, wall time,
-    ``action_chunk_size_varied`` (whether the policy's chunks had more than one length K;
-    ``action_chunk_size`` is the largest), ``episode_restarts`` (how often each episode was
-    played again from its reset after its policy lost it, e.g. a dropped server
-    connection) and, with videos, each episode's video path relative to the run
-    directory)."""
-    if len(episodes) != config.n_episodes:
-        raise ValueError(f"{task.env_id}: {len(episodes)} episodes, expected {config.n_episodes}")
-    successes = [bool(e.success_once) for e in episodes]
-    returns = [float(e.episode_return) for e in episodes]
-    lengths = [int(e.n_steps) for e in episodes]
-    n = len(successes)
-    chunk_sizes = {k for e in episodes for k in e.chunk_sizes}
-    lo, hi = wilson_interval(sum(successes), n)
-    settings = protocol_settings(config)
-    out = {
-        "env_id": task.env_id,
-        "split": task.split.title(),
-        "memory_type": task.memory_type,
-        "start_seed": config.start_seed,
-        "n_episodes": config.n_episodes,
-        "successes": successes,
-        "returns": returns,
-        "sr": sum(successes) / n,
-        "mean_return": sum(returns) / n,
-        "benchmark_commit": commit,
-        "control_mode": config.control_mode,
-        "obs_mode": config.obs_mode,
-        "wrapper_chain": config.wrapper_chain,
-        "action_chunk_size": max(chunk_sizes | {int(action_chunk_size)}),
-        "model": dict(model or {}),
-        "episode_lengths": lengths,
-        "episode_seeds": [int(e.seed) for e in episodes],
-        # --- extensions (extra keys only, see benchmark.md §10) ---
-        "sr_ci95": [lo, hi],
-        "mean_episode_length": sum(lengths) / n,
-        "reward_mode": config.reward_mode,
-        "sim_backend": config.sim_backend,
-        "include_overlays": config.include_overlays,
-        "num_envs": NUM_ENVS,
-        "render_device": settings["render_device"],
-        "policy_batch": config.policy_batch,
-        "canonical": settings["canonical"],
-        "wall_time_s": wall_time_s,
-        "action_chunk_size_varied": len(chunk_sizes) > 1,
-        "episode_restarts": [int(r) for r in restarts] if restarts is not None else [0] * n,
-    }
-    if videos is not None:
-        out["videos"] = list(videos)
-    return out
-
-
-def build_summary(results: Sequence[Mapping[str, Any]], **extensions: Any) -> dict[str, Any]:
-    """`summarize_task_results` plus per-task CIs, per-split and per-split-per-memory-type
-    success rates, then ``extensions`` (protocol, versions, wall time, ...) in order."""
-    summary = summarize_task_results(results)
-    per_task = {r["env_id"]: r for r in results}
-    summary["per_task_sr_ci95"] = {
-        k: list(wilson_interval(sum(bool(s) for s in r["successes"]), len(r["successes"])))
-        for k, r in per_task.items()
-    }
-    uniq = list(per_task.values())
-    summary["sr_per_split"] = aggregate_by(uniq, "split")
-    summary["sr_per_split_memory_type"] = {
-        s: dict(sorted(d.items())) for s, d in aggregate_by(uniq, "split", "memory_type").items()
-    }
-    summary["n_tasks"] = len(uniq)
-    summary["n_episodes_total"] = sum(len(r["successes"]) for r in uniq)
-    summary.update(extensions)
-    return summary
-
-
-def write_benchmark_results(
-    output_dir: str | Path,
-    task_results: Sequence[Mapping[str, Any]],
-    summary: Mapping[str, Any],
-) -> None:
-    """Write every ``<env_id>.json`` and ``summary.json`` into ``output_dir``."""
-    out = Path(output_dir)
-    for r in task_results:
-        atomic_write_json(out / f"{r['env_id']}.json", r)
-    atomic_write_json(out / SUMMARY_FILENAME, summary)
-
-
-# ------------------------------------------------------------------------------------
-# run store (used by the runner: create / resume, journal, per-task files, summary)
-# ------------------------------------------------------------------------------------
 
 
 @dataclass
@@ -297,7 +131,7 @@ class RunStore:
                 f"cannot resume {run_dir}: it has no {META_DIRNAME}/{RUN_META_FILENAME}; "
                 f"expected a run directory created by `mikasa-bench run`"
             )
-        meta = _read_json(meta_path)
+        meta = read_json(meta_path)
         if meta.get("format") != RUN_FORMAT:
             raise BenchError(
                 f"{meta_path}: unknown format {meta.get('format')!r}, expected {RUN_FORMAT}"
@@ -326,7 +160,7 @@ class RunStore:
             path = self.run_dir / f"{task.env_id}.json"
             if not path.exists():
                 continue
-            result = _read_json(path)
+            result = read_json(path)
             if result.get("episode_seeds") != seeds or len(result.get("successes", [])) != len(
                 seeds
             ):
@@ -420,10 +254,8 @@ class RunStore:
         its video; a video without a journal line (crash in between) is simply replaced
         when ``--resume`` reruns the episode.
         """
-        from .video import video_relpath
-
         rel = video_relpath(env_id, episode)
-        _atomic_write_bytes(self.run_dir / rel, data)
+        atomic_write_bytes(self.run_dir / rel, data)
         return rel
 
     def record_episode(
@@ -534,80 +366,3 @@ class RunStore:
         if summary is not None:
             atomic_write_json(self.run_dir / SUMMARY_FILENAME, summary)
         return summary
-
-
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise BenchError(f"cannot read {path}: {exc.strerror or exc}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise BenchError(f"{path} is not valid JSON ({exc})") from None
-
-
-# ------------------------------------------------------------------------------------
-# reading finished runs (report / compare)
-# ------------------------------------------------------------------------------------
-
-_TASK_KEYS = ("env_id", "split", "memory_type", "successes", "returns", "sr")
-
-
-@dataclass
-class RunData:
-    """A results directory as read back: per-task results (in run order), the summary."""
-
-    run_dir: Path
-    label: str
-    results: list[dict[str, Any]]
-    summary: dict[str, Any] | None
-    source: str = ""  # how the user named it, where that is not the path (reference:<name>)
-
-    @property
-    def protocol(self) -> dict[str, Any]:
-        """The summary's protocol record, or one reconstructed from the task files."""
-        if self.summary and isinstance(self.summary.get("protocol"), dict):
-            return self.summary["protocol"]
-        r = self.results[0]
-        return {k: r.get(k) for k in ("start_seed", "n_episodes", "obs_mode", "control_mode")}
-
-
-def load_run(run_dir: str | Path, label: str | None = None) -> RunData:
-    """Read a results directory (every ``*.json`` but ``summary.json`` is a task file), or a
-    result set shipped with the package, named ``reference:<name>`` (`mikasa_bench.reference`).
-
-    Raises `BenchError` if the directory is missing, unreadable, holds a malformed file, or
-    has no task results, or if there is no reference set of that name.
-    """
-    from .reference import is_reference, resolve_reference
-
-    source = str(run_dir) if is_reference(run_dir) else ""
-    run_dir = resolve_reference(source) if source else Path(run_dir)
-    if not run_dir.is_dir():
-        raise BenchError(
-            f"results directory {run_dir} does not exist; expected a directory written by "
-            f"`mikasa-bench run` (with <env_id>.json files and summary.json)"
-        )
-    try:
-        files = sorted(p for p in run_dir.glob("*.json") if p.name != SUMMARY_FILENAME)
-    except OSError as exc:
-        raise BenchError(f"cannot read results directory {run_dir}: {exc}") from None
-    by_id: dict[str, dict[str, Any]] = {}
-    for path in files:
-        data = _read_json(path)
-        if not isinstance(data, dict) or not all(k in data for k in _TASK_KEYS):
-            continue  # not a task result (e.g. a user's note): ignored like upstream's loader
-        by_id[data["env_id"]] = data
-    if not by_id:
-        raise BenchError(
-            f"{run_dir} contains no per-task result files; expected <env_id>.json files with "
-            f"keys {', '.join(_TASK_KEYS)} written by `mikasa-bench run`"
-        )
-    summary_path = run_dir / SUMMARY_FILENAME
-    summary = _read_json(summary_path) if summary_path.exists() else None
-    order: Iterable[str] = (summary or {}).get("tasks") or []
-    ordered = [by_id[i] for i in order if i in by_id]
-    ordered += [r for i, r in by_id.items() if i not in set(order)]
-    if label is None:
-        model = (summary or {}).get("model") or ordered[0].get("model") or {}
-        label = model.get("name") or run_dir.name
-    return RunData(run_dir, str(label), ordered, summary, source)

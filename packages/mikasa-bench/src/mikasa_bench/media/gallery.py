@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from .gallery_html import write_index
-from .protocol import BenchmarkConfig
-from .results import _atomic_write_bytes, atomic_write_json
+from mikasa_bench.media.gallery_html import write_index
+from mikasa_bench.protocol import BenchmarkConfig
+from mikasa_bench.results.files import atomic_write_bytes, atomic_write_json
 
 __all__ = [
     "PHASE_COLORS",
@@ -155,7 +155,7 @@ def write_animation(path: Path, frames: Sequence[np.ndarray], strides: Sequence[
         quality=80,
         method=4,
     )
-    _atomic_write_bytes(path, encoded.getvalue())
+    atomic_write_bytes(path, encoded.getvalue())
 
 
 def _docstring_sections(cls: type) -> dict[str, str]:
@@ -193,7 +193,7 @@ def task_card(env_id: str, env: Any) -> dict[str, Any]:
     """What the page says about ``env_id`` (``env``: the made env, for its class)."""
     from mikasa_envs.manifest import get_task
 
-    from .chance import task_chance
+    from mikasa_bench.chance import task_chance
 
     spec, chance = get_task(env_id), task_chance(env_id)
     base = env.unwrapped
@@ -217,8 +217,8 @@ def render_task(
     env_id: str, out_dir: str | Path, seed: int, scale: int = 1, max_frames: int = 120
 ) -> dict[str, Any]:
     """Run the oracle for one episode of ``env_id`` and write its animation and card; returns the card."""
-    from .episode import make_benchmark_env, run_episode
-    from .policies import build_policy, resolve_policy
+    from mikasa_bench.episode import make_benchmark_env, run_episode
+    from mikasa_bench.policies import build_policy, resolve_policy
 
     tasks_dir = Path(out_dir) / "tasks"
     tasks_dir.mkdir(parents=True, exist_ok=True)
@@ -251,8 +251,8 @@ def render_task(
 def _init_worker(worker_config: BenchmarkConfig, n_workers: int) -> None:
     """Each worker renders as the bench's pool workers do (`worker_env_vars`: its device,
     its share of the cores, one GPU)."""
-    from .executor import worker_env_vars
-    from .render import apply_environment
+    from mikasa_bench.executor import worker_env_vars
+    from mikasa_bench.media.render import apply_environment
 
     apply_environment(worker_env_vars(worker_config, 0, n_workers))
     from mikasa_envs.workers import use_one_gpu  # after the Vulkan restriction: loads ManiSkill
@@ -319,7 +319,7 @@ def build_gallery(
 
 def add_gallery_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``gallery`` subcommand to an argparse subparsers object."""
-    from .protocol import START_SEED, SUPPORTED_SPLITS
+    from mikasa_bench.protocol import START_SEED, SUPPORTED_SPLITS
 
     p = sub.add_parser(
         "gallery",
@@ -361,8 +361,8 @@ def add_gallery_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run_gallery(args: argparse.Namespace) -> int:
     """The ``gallery`` subcommand; returns the exit code (0, or 2 on bad input)."""
-    from .errors import BenchError
-    from .tasks import registered_env_ids, resolve_tasks
+    from mikasa_bench.errors import BenchError
+    from mikasa_bench.tasks import registered_env_ids, resolve_tasks
 
     try:
         if args.task or args.split:
