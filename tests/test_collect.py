@@ -274,9 +274,9 @@ class _LifoPool:
     max_in_flight = 0
 
     def __init__(self, runner_args, workers, envs_per_worker=1):
-        from mikasa_oracles import collect as collect_module
+        from mikasa_oracles import collect_pools
 
-        self.runner = collect_module._AttemptRunner(*runner_args)
+        self.runner = collect_pools.AttemptRunner(*runner_args)
         self.slots = workers * envs_per_worker
         self.submitted: list[int] = []
 
@@ -295,8 +295,9 @@ def test_out_of_order_completion_keeps_seed_order(tmp_path, monkeypatch):
     """Indices follow seed order whatever the completion order; failed seeds are skipped;
     no attempt is started that could not be needed."""
     from mikasa_oracles import collect as collect_module
+    from mikasa_oracles import collect_pools
 
-    monkeypatch.setattr(collect_module, "_AttemptRunner", _FakeRunner)
+    monkeypatch.setattr(collect_pools, "AttemptRunner", _FakeRunner)
     monkeypatch.setattr(collect_module, "ProcessPool", _LifoPool)
     serial = run(tmp_path / "serial", n=5)
     parallel = run(tmp_path / "parallel", n=5, workers=4)

@@ -80,6 +80,80 @@ def test_no_oracle_for_unknown_family(make_env, monkeypatch):
         make_oracle(env)
 
 
+# --------------------------------------------------------------------------- the registry
+class _OutsideOracle:
+    """An oracle class defined outside mikasa_oracles (never rolled out here)."""
+
+    def __init__(self, env, **kwargs):
+        self.env = env
+
+
+def test_second_oracle_for_a_family_is_rejected():
+    from mikasa_oracles import ORACLES, DuplicateOracleError, register_oracle
+
+    existing = ORACLES["remember_color"]
+    with pytest.raises(
+        DuplicateOracleError,
+        match=r"family 'remember_color' already has the oracle "
+        r"mikasa_oracles\.families\.selection\.SelectionOracle; cannot register "
+        r"test_oracles\._OutsideOracle",
+    ):
+        register_oracle("family_from_a_test", "remember_color")(_OutsideOracle)
+    # Nothing changed, not even the family that had no oracle yet.
+    assert ORACLES["remember_color"] is existing and "family_from_a_test" not in ORACLES
+    register_oracle("remember_color")(existing)  # the same class again: a no-op
+
+
+def test_unknown_family_names_the_known_ones():
+    from mikasa_oracles import MEMORYLESS_ORACLES, ORACLES, UnknownFamilyError, oracle_class
+
+    for memoryless, table, kind in ((False, ORACLES, "oracle"), (True, MEMORYLESS_ORACLES, "memoryless oracle")):
+        with pytest.raises(UnknownFamilyError, match=f"no {kind} for family 'no_such_family'; they exist for: ") as err:
+            oracle_class("no_such_family", memoryless)
+        assert str(err.value).endswith(", ".join(sorted(table))) and "remember_color" in table
+
+
+def test_oracle_registered_outside_the_package_is_found(make_env, monkeypatch):
+    """A module outside mikasa_oracles (this one) registers an oracle for a manifest family;
+    make_oracle (the bench), has_oracle and mikasa-collect's task check find it."""
+    import mikasa_oracles
+    from mikasa_oracles import has_oracle, oracle_class, register_oracle
+    from mikasa_oracles.collect import resolve_task
+
+    # Take the family's built-in oracle out for this test (put back afterwards).
+    monkeypatch.delitem(mikasa_oracles.ORACLES, "shell_game_touch")
+    assert not has_oracle("ShellGameTouch-VLA-v0")
+    register_oracle("shell_game_touch")(_OutsideOracle)
+    assert has_oracle("ShellGameTouch-VLA-v0") and oracle_class("shell_game_touch") is _OutsideOracle
+    assert resolve_task("ShellGameTouch-VLA-v0").family == "shell_game_touch"
+    assert isinstance(make_oracle(make_env("ShellGameTouch-VLA-v0")), _OutsideOracle)
+
+
+def test_entry_point_registers_an_oracle_in_a_fresh_process(tmp_path):
+    """An installed distribution's entry point (group mikasa_oracles.families) is imported
+    by ``import mikasa_oracles``: worker processes find its oracle too."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "outside_oracles.py").write_text(
+        "from mikasa_oracles import register_oracle\n"
+        "from mikasa_oracles.scripted import ScriptedOracle\n\n\n"
+        "@register_oracle('family_from_a_plugin')\n"
+        "class PluginOracle(ScriptedOracle):\n"
+        "    pass\n"
+    )
+    dist_info = tmp_path / "outside_oracles-0.1.dist-info"
+    dist_info.mkdir()
+    (dist_info / "METADATA").write_text("Metadata-Version: 2.1\nName: outside-oracles\nVersion: 0.1\n")
+    (dist_info / "entry_points.txt").write_text("[mikasa_oracles.families]\noutside = outside_oracles\n")
+    code = "import mikasa_oracles; print(mikasa_oracles.oracle_class('family_from_a_plugin').__name__)"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "PluginOracle"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", REGISTERED_IDS)
 def test_oracle_success_rate_50_seeds(make_env, env_id):

@@ -6,17 +6,21 @@ from typing import Any
 
 import gymnasium as gym
 
-from mikasa_oracles.families import ALL_MEMORYLESS_ORACLES, ALL_ORACLES
+from mikasa_oracles import families  # noqa: F401  (imported: registers the built-in oracles)
 from mikasa_oracles.families.selection import SelectionOracle
 from mikasa_oracles.joint_delta import EEDeltaToJointDelta, JointDeltaOracle
+from mikasa_oracles.registry import (
+    MEMORYLESS_ORACLES,
+    ORACLES,
+    DuplicateOracleError,
+    UnknownFamilyError,
+    load_entry_point_oracles,
+    oracle_class,
+    register_oracle,
+)
 from mikasa_oracles.rollout import Rollout, ZeroActions, rollout
 
 __version__ = "0.1.0"
-
-# Task family (manifest) -> oracle class.
-ORACLES: dict[str, type] = ALL_ORACLES
-# Task family -> the oracle's memoryless variant (`mikasa_oracles.scripted.Memoryless`).
-MEMORYLESS_ORACLES: dict[str, type] = ALL_MEMORYLESS_ORACLES
 
 
 def has_oracle(env_id: str) -> bool:
@@ -32,31 +36,33 @@ def make_oracle(env: gym.Env, memoryless: bool = False, **kwargs) -> Any:
     ``memoryless=True`` builds its memoryless variant: the same controller, but whatever it
     remembers about the hidden answer is wiped before every step, and it guesses (seeded
     by the episode seed given to ``reset(seed)``) where the current frame does not show the
-    answer. ``kwargs`` go to the oracle class.
+    answer. ``kwargs`` go to the oracle class. Raises `UnknownFamilyError` (a ``ValueError``)
+    if no oracle is registered for the task's family (`register_oracle`).
     """
     from mikasa_envs.manifest import get_task
 
     env_id = env.spec.id if env.spec is not None else env.unwrapped.spec.id
     family = get_task(env_id).family
-    table = MEMORYLESS_ORACLES if memoryless else ORACLES
-    if family not in table:
-        raise ValueError(
-            f"no {'memoryless ' if memoryless else ''}oracle for {env_id!r} (family {family!r}); "
-            f"they exist for: {', '.join(sorted(table))}"
-        )
-    return table[family](env, **kwargs)
+    return oracle_class(family, memoryless, env_id=env_id)(env, **kwargs)
 
 
 __all__ = [
     "ZeroActions",
     "MEMORYLESS_ORACLES",
     "ORACLES",
+    "DuplicateOracleError",
     "EEDeltaToJointDelta",
     "JointDeltaOracle",
     "Rollout",
     "SelectionOracle",
+    "UnknownFamilyError",
     "has_oracle",
     "make_oracle",
+    "oracle_class",
+    "register_oracle",
     "rollout",
     "__version__",
 ]
+
+# Last: the registering modules of other distributions may import anything above.
+load_entry_point_oracles()

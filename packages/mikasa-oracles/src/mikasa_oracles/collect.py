@@ -35,13 +35,16 @@ Modules
     This one plans and commits a task's collection (:func:`collect`); one attempt (the
     per-worker episode loop) is :mod:`mikasa_oracles.collect_attempts`, the task
     directory's lock and resume checks :mod:`mikasa_oracles.collect_resume`, the pools
-    :mod:`mikasa_oracles.collect_pools` and the command line :mod:`mikasa_oracles.collect_cli`.
+    :mod:`mikasa_oracles.collect_pools`, their shared errors
+    :mod:`mikasa_oracles.collect_errors` and the command line
+    :mod:`mikasa_oracles.collect_cli` (``mikasa-collect``, ``python -m
+    mikasa_oracles.collect_cli``). Imports run one way: cli -> collect -> pools, resume,
+    attempts -> errors.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,24 +56,12 @@ from mikasa_oracles.collect_attempts import (  # noqa: F401  (re-exported)
     SIM_BACKEND,
     STAGED_PREFIX,
     AttemptResult,
-    _AttemptRunner,
-    _first,
-    _language,
     make_collection_env,
     seed_global_rngs,
 )
-from mikasa_oracles.collect_pools import (
-    CollectError,
-    CollectionFailed,
-    InlinePool,
-    ProcessPool,
-    RayPool,
-)
-from mikasa_oracles.collect_resume import (  # noqa: F401  (re-exported)
-    _clean_staging,
-    _existing_episodes,
-    locked_directory,
-)
+from mikasa_oracles.collect_errors import CollectError, CollectionFailed
+from mikasa_oracles.collect_pools import InlinePool, ProcessPool, RayPool
+from mikasa_oracles.collect_resume import clean_staging, existing_episodes, locked_directory
 
 __all__ = [
     "AttemptResult",
@@ -284,8 +275,8 @@ def collect(
         # A run killed mid-write leaves temporary files (never final names) and staged
         # attempts; both are redone deterministically.
         remove_stale_temp_files(directory)
-        _clean_staging(staging)
-        committed = _existing_episodes(directory, env_id, start_seed)
+        clean_staging(staging)
+        committed = existing_episodes(directory, env_id, start_seed)
         summary.existing_episodes = len(committed)
         if len(committed) > num_episodes:
             raise CollectError(
@@ -392,7 +383,7 @@ def collect(
             bar.close()
             if own_pool:
                 pool.close(graceful=ok)
-            _clean_staging(staging)
+            clean_staging(staging)
             summary.wall_s = time.perf_counter() - t0
             if summary.attempts:
                 summary.seeds = (first_seed, next_seed - 1)
@@ -403,9 +394,3 @@ def collect(
                 f"--max-attempts and rerun to continue\n{summary.format()}"
             )
     return summary
-
-
-if __name__ == "__main__":  # python -m mikasa_oracles.collect: the command line
-    from mikasa_oracles.collect_cli import main
-
-    sys.exit(main())

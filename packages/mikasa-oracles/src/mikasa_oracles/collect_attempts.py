@@ -3,7 +3,7 @@
 An attempt rolls out one seed of a task's oracle through the recording env (the canonical
 VLA wrapper chain, ``obs_mode="rgb"``, ``pd_ee_delta_pose``, ``normalized_dense``, CPU
 simulation) and stages a kept episode as ``seed_<s>.npz`` in the staging directory.
-:class:`_AttemptRunner` is what every pool of :mod:`mikasa_oracles.collect_pools` runs.
+:class:`AttemptRunner` is what every pool of :mod:`mikasa_oracles.collect_pools` runs.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ def _first(value: Any) -> Any:
 
 
 def _language(info: Any) -> str:
+    """The ``language_instruction`` an env reports in ``info`` ("" if none)."""
     if not isinstance(info, dict):
         return ""
     value = info.get("language_instruction")
@@ -86,7 +87,7 @@ def make_collection_env(env_id: str) -> Any:
         raise
 
 
-class _AttemptRunner:
+class AttemptRunner:
     """Runs attempts of one task: owns one env and its oracle (built on first use)."""
 
     def __init__(

@@ -19,7 +19,7 @@ and one for these is built, so one pool serves the tasks of a ``--split`` or rep
   shared filesystem.
 
 A runner is built by ``factory(*runner_args)`` (default: the VLA collector's attempt runner,
-``mikasa_oracles.collect._AttemptRunner``, whose second argument is the staging directory).
+``mikasa_oracles.collect_attempts.AttemptRunner``, whose second argument is the staging directory).
 """
 
 from __future__ import annotations
@@ -35,19 +35,10 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from mikasa_oracles.collect_attempts import AttemptRunner
+from mikasa_oracles.collect_errors import CollectError, CollectionFailed
+
 __all__ = ["CollectError", "CollectionFailed", "InlinePool", "ProcessPool", "RayPool"]
-
-class CollectError(ValueError):
-    """Bad input (unknown task, no oracle, bad counts, inconsistent existing data): exit 2."""
-
-
-class CollectionFailed(RuntimeError):
-    """The collection could not finish (attempt budget spent, a worker crashed): exit 1.
-
-    Episodes saved so far stay valid; re-running continues from them.
-    """
-
-
 
 
 class _TaskRunner:
@@ -76,7 +67,7 @@ class _TaskRunner:
 class InlinePool:
     """``--workers 1``: attempts run in this process, one at a time.
 
-    ``factory(*runner_args)`` builds the runner (default :class:`_AttemptRunner`; the RL
+    ``factory(*runner_args)`` builds the runner (default :class:`AttemptRunner`; the RL
     collector, ``mikasa_robo_rl.collect``, passes its own; None: built on the first job).
     """
 
@@ -131,7 +122,7 @@ class ProcessPool:
     """``--workers W``: W spawn-started processes sharing one job queue.
 
     Each process runs ``envs_per_worker`` runners built by ``factory(*runner_args)``
-    (default :class:`_AttemptRunner`; ``factory`` must be importable by name, e.g. a
+    (default :class:`AttemptRunner`; ``factory`` must be importable by name, e.g. a
     module-level class; ``runner_args`` None: each job names its own), in as many threads
     when there are several (their envs then render in shared passes; a runner's results
     must not depend on the other threads: the collectors' do not, each attempt building its
@@ -213,11 +204,9 @@ class ProcessPool:
 
 
 def _runner_factory(factory: Callable[..., Any] | None) -> Callable[..., Any]:
-    if factory is not None:
-        return factory
-    from mikasa_oracles.collect import _AttemptRunner  # the default; collect imports this module
-
-    return _AttemptRunner
+    """``factory``, or the default: the VLA collector's :class:`AttemptRunner` (looked up
+    when the pool builds its runners, so a test can stand in for it)."""
+    return factory if factory is not None else AttemptRunner
 
 
 class _RayAttemptWorker:

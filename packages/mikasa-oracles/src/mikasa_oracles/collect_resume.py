@@ -11,7 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from mikasa_oracles.collect_attempts import STAGED_PREFIX
-from mikasa_oracles.collect_pools import CollectError
+from mikasa_oracles.collect_errors import CollectError
+
+__all__ = ["clean_staging", "existing_episodes", "locked_directory"]
 
 
 @contextmanager
@@ -29,7 +31,7 @@ def locked_directory(directory: Path) -> Iterator[None]:
         os.close(fd)
 
 
-def _clean_staging(staging: Path) -> None:
+def clean_staging(staging: Path) -> None:
     """Remove this collector's staged and temporary files, then empty staging dirs."""
     from mikasa_datasets.npz import is_temp_file
 
@@ -46,7 +48,7 @@ def _clean_staging(staging: Path) -> None:
             pass
 
 
-def _existing_episodes(directory: Path, env_id: str, start_seed: int) -> list[Any]:
+def existing_episodes(directory: Path, env_id: str, start_seed: int) -> list[Any]:
     """Check the episodes already in ``directory`` and return their summaries (resume)."""
     from mikasa_datasets.npz import (
         METADATA_FILENAME,

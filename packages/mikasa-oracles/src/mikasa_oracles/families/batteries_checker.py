@@ -28,6 +28,7 @@ import numpy as np
 from transforms3d.quaternions import qmult, quat2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 Actions = Generator[np.ndarray, None, bool]
@@ -81,6 +82,7 @@ def finger_target(gripper: float) -> float:
     return -0.01 + (gripper + 1.0) / 2.0 * 0.05
 
 
+@register_oracle("batteries_checker_easy", "batteries_checker_hard")
 class BatteriesCheckerOracle(ScriptedOracle):
     """Scripted solver of both BatteriesChecker families; ``num_envs == 1``."""
 
@@ -278,6 +280,7 @@ class BatteriesCheckerOracle(ScriptedOracle):
         return True
 
 
+@register_oracle("batteries_checker_easy", "batteries_checker_hard", memoryless=True)
 class MemorylessBatteriesCheckerOracle(Memoryless, BatteriesCheckerOracle):
     """The BatteriesChecker oracle without memory: the lamp readings (``working_seen``) are
     wiped every step, and it never reads the checklist (``checked_mask``, which no camera
@@ -298,13 +301,3 @@ class MemorylessBatteriesCheckerOracle(Memoryless, BatteriesCheckerOracle):
 
     def _next_battery(self) -> int | None:
         return int(self.draws.integers(int(self.base.active_battery_count)))
-
-
-ORACLES: dict[str, type] = {
-    "batteries_checker_easy": BatteriesCheckerOracle,
-    "batteries_checker_hard": BatteriesCheckerOracle,
-}
-MEMORYLESS_ORACLES: dict[str, type] = {
-    "batteries_checker_easy": MemorylessBatteriesCheckerOracle,
-    "batteries_checker_hard": MemorylessBatteriesCheckerOracle,
-}

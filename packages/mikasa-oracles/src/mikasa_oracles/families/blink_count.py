@@ -16,6 +16,7 @@ import numpy as np
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
@@ -28,6 +29,7 @@ LIFT_Z = 0.18
 ALIGN_TOLERANCE = 0.01
 
 
+@register_oracle("blink_count_button_press")
 class BlinkCountOracle(ScriptedOracle):
     """Scripted solver of BlinkCountButtonPress; ``num_envs == 1``.
 
@@ -78,6 +80,7 @@ class BlinkCountOracle(ScriptedOracle):
         return move_towards(tcp_pose, goal, self.hold_rotation, self.gain, GRIPPER_CLOSED)
 
 
+@register_oracle("blink_count_button_press", memoryless=True)
 class MemorylessBlinkCountOracle(Memoryless, BlinkCountOracle):
     """The blink-count oracle without memory: the blink count (and whether the lamp was lit
     a frame ago) is wiped every step, so no blink is ever counted.
@@ -100,7 +103,3 @@ class MemorylessBlinkCountOracle(Memoryless, BlinkCountOracle):
         if self.ready_seen:
             lo, hi = self.base.BLINK_COUNT_RANGE
             self.blinks_seen = lo + self.guess(hi - lo + 1)
-
-
-ORACLES: dict[str, type] = {"blink_count_button_press": BlinkCountOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {"blink_count_button_press": MemorylessBlinkCountOracle}

@@ -19,6 +19,7 @@ from mikasa_envs.building_blocks.buttons import CONFIRM_LIFT
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless
 
 GRIPPER_CLOSED = -1.0
@@ -48,7 +49,10 @@ LIFT_Z = 0.18
 CONFIRM_MARGIN = 0.01
 PRESS_AIM_RADIUS = 0.035
 
+FAMILIES = ("bunch_of_colors", "seq_of_colors", "chain_of_colors")
 
+
+@register_oracle(*FAMILIES)
 class ColorSequenceOracle:
     """Scripted solver of the colour-sequence tasks; one instance per env, ``num_envs == 1``.
 
@@ -177,6 +181,7 @@ class ColorSequenceOracle:
         return np.array([*aim, PRESS_Z])
 
 
+@register_oracle(*FAMILIES, memoryless=True)
 class MemorylessColorSequenceOracle(Memoryless, ColorSequenceOracle):
     """The colour-sequence oracle without memory: the cubes seen in the cue (and the plan
     made from them) are wiped every step.
@@ -202,11 +207,3 @@ class MemorylessColorSequenceOracle(Memoryless, ColorSequenceOracle):
             self.seen_in_cue = [int(k) for k in picks]
             tcp = self.park_point
         return super()._make_plan(tcp, cubes, button)
-
-
-ORACLES: dict[str, type] = {
-    family: ColorSequenceOracle for family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors")
-}
-MEMORYLESS_ORACLES: dict[str, type] = {
-    family: MemorylessColorSequenceOracle for family in ("bunch_of_colors", "seq_of_colors", "chain_of_colors")
-}

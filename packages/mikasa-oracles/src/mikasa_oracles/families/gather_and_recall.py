@@ -17,6 +17,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 from mikasa_oracles.waypoints import (
     GRIPPER_CLOSED,
@@ -39,6 +40,7 @@ PLACED_MAX_Z = 0.1
 SPOT_TAKEN_RADIUS = 0.035
 
 
+@register_oracle("gather_and_recall")
 class GatherAndRecallOracle(ScriptedOracle):
     """Scripted solver of GatherAndRecall; one instance per env, ``num_envs == 1``."""
 
@@ -140,6 +142,7 @@ class GatherAndRecallOracle(ScriptedOracle):
         return self.follower.action(tcp_pose, idle_gripper=GRIPPER_CLOSED)
 
 
+@register_oracle("gather_and_recall", memoryless=True)
 class MemorylessGatherAndRecallOracle(Memoryless, GatherAndRecallOracle):
     """The GatherAndRecall oracle without memory: the flash colour is wiped every step.
 
@@ -172,7 +175,3 @@ class MemorylessGatherAndRecallOracle(Memoryless, GatherAndRecallOracle):
     def _plan_press(self) -> None:
         self.press_button = self.flash_seen
         super()._plan_press()
-
-
-ORACLES: dict[str, type] = {"gather_and_recall": GatherAndRecallOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {"gather_and_recall": MemorylessGatherAndRecallOracle}

@@ -4,7 +4,7 @@ Both see the ball the way a camera does: its position in each frame that shows i
 (``ball_visible``: the VLA ids show it for its first 10 frames, then only once the robot has
 touched it). They estimate its velocity from the positions of the frames seen so far (one
 frame shows no motion) and predict its straight rolling path, and where it is while out of
-view; the launch velocity (``oracle_info``) is never read.
+view (`mikasa_oracles.ball_motion`); the launch velocity (``oracle_info``) is never read.
 
 Moving targets are tracked with feedforward: ``pd_ee_delta_pose`` moves the TCP only part
 of the way to the commanded pose in one step, so a hand following a point that moves by
@@ -19,7 +19,9 @@ from typing import Any
 import numpy as np
 from mani_skill.utils.gym_utils import find_max_episode_steps_value
 
+from mikasa_oracles.ball_motion import FIRST_ROLLING_FRAME, BallObserver, GuessedMotionObserver
 from mikasa_oracles.controller import EE_DELTA_POS_SCALE, move_towards, tilted
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 DOWN_QUAT = np.array([0.0, 1.0, 0.0, 0.0])
@@ -32,71 +34,6 @@ NEAR_MAX_TILT = 0.35
 DEFAULT_HORIZON = 60
 ROBOT_BASE_XY = (-0.615, 0.0)
 REACH_RADIUS = 0.78
-# The ball slides for its first ~3 steps before it rolls: fit the velocity to later frames.
-FIRST_ROLLING_FRAME = 3
-# A rolling ball keeps this share of its speed from one step to the next (measured: 1.4 %
-# a second); predictions 40 steps ahead are then within 0.5 mm.
-ROLLING_DECAY = 0.99929
-
-
-class BallObserver:
-    """Remembers the ball's position in every frame seen and fits its rolling motion.
-
-    ``now`` is the ball's position in the current frame: seen (``see``) or, while the ball
-    is out of view, predicted from the fit (``predict``).
-    """
-
-    def __init__(self) -> None:
-        self.frames: list[int] = []
-        self.positions: list[np.ndarray] = []
-        self.fit_from = FIRST_ROLLING_FRAME
-        self.now = np.zeros(2)
-
-    def refit_from(self, frame: int) -> None:
-        """Fit the motion only to frames from ``frame`` on (the ball was hit before)."""
-        self.fit_from = frame
-
-    def see(self, frame: int, position: np.ndarray) -> None:
-        """Record the ball centre (xy) seen in ``frame``."""
-        self.frames.append(frame)
-        self.positions.append(np.asarray(position[:2], dtype=np.float64))
-        self.now = self.positions[-1]
-
-    def predict(self, frame: int) -> None:
-        """The ball is out of view in ``frame``: move ``now`` on along the fitted path from
-        the last frame seen, slowing as a rolling ball does."""
-        fit = self._fit()
-        if fit is None:
-            self.now = self.positions[-1]
-            return
-        # The fit is the velocity at the middle of the frames it used; the speed at the last
-        # one is a little lower, and every later step keeps ROLLING_DECAY of it.
-        velocity, fit_frame = fit
-        last_velocity = velocity * ROLLING_DECAY ** (self.frames[-1] - fit_frame)
-        steps = frame - self.frames[-1]
-        self.now = self.positions[-1] + last_velocity * ROLLING_DECAY * (1 - ROLLING_DECAY**steps) / (1 - ROLLING_DECAY)
-
-    def velocity(self) -> np.ndarray | None:
-        """xy displacement per step, fitted by least squares (None before two frames)."""
-        fit = self._fit()
-        return None if fit is None else fit[0]
-
-    def _fit(self) -> tuple[np.ndarray, float] | None:
-        """The fitted velocity and the frame it holds for (the middle of the frames used)."""
-        frames = np.asarray(self.frames, dtype=np.float64)
-        positions = np.asarray(self.positions)
-        rolling = frames >= self.fit_from
-        if rolling.sum() >= 2:
-            frames, positions = frames[rolling], positions[rolling]
-        elif len(frames) >= 2:
-            # Still sliding: the last displacement, slowed to the rolling speed it settles at.
-            return (positions[-1] - positions[-2]) * 0.9, float(frames[-2:].mean())
-        else:
-            return None
-        centred = frames - frames.mean()
-        velocity = (centred[:, None] * (positions - positions.mean(axis=0))).sum(axis=0) / (centred**2).sum()
-        return velocity, float(frames.mean())
-
 
 
 def within_reach(xy: np.ndarray) -> bool:
@@ -236,6 +173,7 @@ class BallChaser(ScriptedOracle):
         return best
 
 
+@register_oracle("intercept_grab")
 class InterceptGrabOracle(BallChaser):
     """Catch the ball from above while moving with it, close the gripper, stop.
 
@@ -280,6 +218,7 @@ class InterceptGrabOracle(BallChaser):
         return track(tcp, np.array([*target_xy, z]), feedforward, gripper)
 
 
+@register_oracle("intercept")
 class InterceptOracle(BallChaser):
     """Bat the ball onto a path over the target, watch it, and bat it again if it misses.
 
@@ -545,25 +484,6 @@ class InterceptOracle(BallChaser):
         return track(tcp, np.array([*tcp[:2], self.HOVER_Z]), np.zeros(3), GRIPPER_CLOSED, self._tilt(tcp))
 
 
-class GuessedMotionObserver(BallObserver):
-    """A `BallObserver` that keeps no frames but the current one and answers a fixed
-    guessed velocity (one frame shows no motion); with the ball out of view, a guessed path
-    (start and velocity) says where it is."""
-
-    def __init__(self, guessed_start: np.ndarray, guessed_velocity: np.ndarray) -> None:
-        super().__init__()
-        self.guessed_start = guessed_start
-        self.guessed_velocity = guessed_velocity
-
-    def velocity(self) -> np.ndarray:
-        """The guess (xy displacement per step)."""
-        return self.guessed_velocity
-
-    def predict(self, frame: int) -> None:
-        """Out of view: the guessed start moved on by the guessed velocity."""
-        self.now = self.guessed_start + self.guessed_velocity * frame
-
-
 class MemorylessBallChaserMixin(Memoryless):
     """The Intercept oracles without memory: the ball's past positions are wiped every
     step, so its velocity cannot be measured (a single frame shows no motion).
@@ -587,16 +507,11 @@ class MemorylessBallChaserMixin(Memoryless):
             self.wait_point = None
 
 
+@register_oracle("intercept", memoryless=True)
 class MemorylessInterceptOracle(MemorylessBallChaserMixin, InterceptOracle):
     """`InterceptOracle` without memory (`MemorylessBallChaserMixin`)."""
 
 
+@register_oracle("intercept_grab", memoryless=True)
 class MemorylessInterceptGrabOracle(MemorylessBallChaserMixin, InterceptGrabOracle):
     """`InterceptGrabOracle` without memory (`MemorylessBallChaserMixin`)."""
-
-
-ORACLES: dict[str, type] = {"intercept": InterceptOracle, "intercept_grab": InterceptGrabOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {
-    "intercept": MemorylessInterceptOracle,
-    "intercept_grab": MemorylessInterceptGrabOracle,
-}

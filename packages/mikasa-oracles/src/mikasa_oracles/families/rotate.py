@@ -29,6 +29,7 @@ from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
@@ -131,6 +132,7 @@ class RotateOracleBase(ScriptedOracle):
         self.stage_steps = 0
 
 
+@register_oracle("rotate_lenient")
 class PushRotateOracle(RotateOracleBase):
     """RotateLenient: turn the peg by pushing one end sideways with the closed fingertips.
 
@@ -291,6 +293,7 @@ class PushRotateOracle(RotateOracleBase):
         return hold(GRIPPER_CLOSED)
 
 
+@register_oracle("rotate_strict")
 class GraspTwistRotateOracle(RotateOracleBase):
     """RotateStrict: grasp the peg at its centre, lift ~1 cm, turn the hand, hold.
 
@@ -406,16 +409,11 @@ class MemorylessRotateMixin(Memoryless):
         return tcp, peg, qpos
 
 
+@register_oracle("rotate_lenient", memoryless=True)
 class MemorylessPushRotateOracle(MemorylessRotateMixin, PushRotateOracle):
     """`PushRotateOracle` without memory (`MemorylessRotateMixin`)."""
 
 
+@register_oracle("rotate_strict", memoryless=True)
 class MemorylessGraspTwistRotateOracle(MemorylessRotateMixin, GraspTwistRotateOracle):
     """`GraspTwistRotateOracle` without memory (`MemorylessRotateMixin`)."""
-
-
-ORACLES: dict[str, type] = {"rotate_lenient": PushRotateOracle, "rotate_strict": GraspTwistRotateOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {
-    "rotate_lenient": MemorylessPushRotateOracle,
-    "rotate_strict": MemorylessGraspTwistRotateOracle,
-}

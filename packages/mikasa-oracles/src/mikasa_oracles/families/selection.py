@@ -15,6 +15,7 @@ import numpy as np
 from mikasa_envs.manifest import SELECTION_FAMILIES
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 # Hidden objects are parked at z = 1000; anything below this height is on the table.
@@ -30,7 +31,10 @@ TILT_FROM_X = 0.05
 TILT_PER_M = 4.0
 MAX_TILT = 0.8
 
+FAMILIES = SELECTION_FAMILIES
 
+
+@register_oracle(*FAMILIES)
 class SelectionOracle(ScriptedOracle):
     """Scripted solver of the selection tasks; one instance per env, ``num_envs == 1``.
 
@@ -80,6 +84,7 @@ class SelectionOracle(ScriptedOracle):
         return move_towards(tcp_pose, goal, tilted(self.start_orientation, tilt), self.gain)
 
 
+@register_oracle(*FAMILIES, memoryless=True)
 class MemorylessSelectionOracle(Memoryless, SelectionOracle):
     """The selection oracle without memory: ``seen_in_cue`` is wiped every step.
 
@@ -99,8 +104,3 @@ class MemorylessSelectionOracle(Memoryless, SelectionOracle):
         positions = self.base.object_positions()[0].cpu().numpy()
         on_table = np.flatnonzero(positions[:, 2] < VISIBLE_BELOW_Z)
         return int(on_table[self.guess(len(on_table))]) if len(on_table) else None
-
-
-FAMILIES = SELECTION_FAMILIES
-ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, SelectionOracle)
-MEMORYLESS_ORACLES: dict[str, type] = dict.fromkeys(FAMILIES, MemorylessSelectionOracle)

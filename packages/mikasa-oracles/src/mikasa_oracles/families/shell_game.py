@@ -23,6 +23,7 @@ from transforms3d.euler import euler2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import hold, move_towards
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 # Hidden objects are parked 1000 m up; anything below this height is in view.
@@ -133,6 +134,7 @@ class ShellGameOracle(ScriptedOracle):
             self.stage_steps = 0
 
 
+@register_oracle("shell_game_touch", "shell_game_shuffle_touch")
 class TouchMugOracle(ShellGameOracle):
     """Hover just above the target mug's top (TCP 7 cm over its centre), then hold still."""
 
@@ -148,6 +150,7 @@ class TouchMugOracle(ShellGameOracle):
         return self._move(tcp_pose, goal)
 
 
+@register_oracle("shell_game_color_lamp_touch", "shell_game_shuffle_color_lamp_touch")
 class ColorLampTouchOracle(TouchMugOracle):
     """Touch the mug that appeared over the ball whose colour the lamp shows."""
 
@@ -163,6 +166,7 @@ class ColorLampTouchOracle(TouchMugOracle):
         return None if colour is None else self.mug_of_ball.get(f"ball_{colour}")
 
 
+@register_oracle("shell_game_push")
 class PushMugOracle(ShellGameOracle):
     """Come down behind the target mug (−x side), push it a few cm along +x, hold still."""
 
@@ -189,6 +193,7 @@ class PushMugOracle(ShellGameOracle):
         return action
 
 
+@register_oracle("shell_game_pick")
 class PickMugOracle(ShellGameOracle):
     """Top-down grasp of the handle loop's top arm, fingers closing across the loop; lift."""
 
@@ -303,18 +308,24 @@ class MemorylessShellGameMixin(Memoryless):
         return self.guess(len(self.tracker.positions))
 
 
+@register_oracle("shell_game_touch", "shell_game_shuffle_touch", memoryless=True)
 class MemorylessTouchMugOracle(MemorylessShellGameMixin, TouchMugOracle):
     """`TouchMugOracle` without memory (`MemorylessShellGameMixin`)."""
 
 
+@register_oracle("shell_game_push", memoryless=True)
 class MemorylessPushMugOracle(MemorylessShellGameMixin, PushMugOracle):
     """`PushMugOracle` without memory (`MemorylessShellGameMixin`)."""
 
 
+@register_oracle("shell_game_pick", memoryless=True)
 class MemorylessPickMugOracle(MemorylessShellGameMixin, PickMugOracle):
     """`PickMugOracle` without memory (`MemorylessShellGameMixin`)."""
 
 
+@register_oracle(
+    "shell_game_color_lamp_touch", "shell_game_shuffle_color_lamp_touch", memoryless=True
+)
 class MemorylessColorLampTouchOracle(MemorylessShellGameMixin, ColorLampTouchOracle):
     """`ColorLampTouchOracle` without memory: the lamp's colour (shown now) and the fixed
     cue slot of that colour's ball pick the slot (`MemorylessShellGameMixin`)."""
@@ -324,21 +335,3 @@ class MemorylessColorLampTouchOracle(MemorylessShellGameMixin, ColorLampTouchOra
         if colour is None:
             return super()._slot_guess()
         return [ball.name for ball in self.base.balls].index(f"ball_{colour}")
-
-
-ORACLES: dict[str, type] = {
-    "shell_game_touch": TouchMugOracle,
-    "shell_game_push": PushMugOracle,
-    "shell_game_pick": PickMugOracle,
-    "shell_game_shuffle_touch": TouchMugOracle,
-    "shell_game_color_lamp_touch": ColorLampTouchOracle,
-    "shell_game_shuffle_color_lamp_touch": ColorLampTouchOracle,
-}
-MEMORYLESS_ORACLES: dict[str, type] = {
-    "shell_game_touch": MemorylessTouchMugOracle,
-    "shell_game_push": MemorylessPushMugOracle,
-    "shell_game_pick": MemorylessPickMugOracle,
-    "shell_game_shuffle_touch": MemorylessTouchMugOracle,
-    "shell_game_color_lamp_touch": MemorylessColorLampTouchOracle,
-    "shell_game_shuffle_color_lamp_touch": MemorylessColorLampTouchOracle,
-}

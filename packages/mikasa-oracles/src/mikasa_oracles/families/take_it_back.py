@@ -22,6 +22,7 @@ import numpy as np
 from transforms3d.euler import euler2mat
 
 from mikasa_oracles.controller import hold, move_towards, tilted
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_CLOSED = -1.0
@@ -56,6 +57,7 @@ MAX_YAW = 0.6
 RETURN_STOP = 0.02
 
 
+@register_oracle("take_it_back")
 class TakeItBackOracle(ScriptedOracle):
     """Scripted solver of TakeItBack; one instance per env, ``num_envs == 1``."""
 
@@ -127,6 +129,7 @@ class TakeItBackOracle(ScriptedOracle):
         return action
 
 
+@register_oracle("take_it_back", memoryless=True)
 class MemorylessTakeItBackOracle(Memoryless, TakeItBackOracle):
     """The TakeItBack oracle without memory: the start spot (the cube's first-frame
     position) is wiped every step, and no frame after the first shows it.
@@ -145,7 +148,3 @@ class MemorylessTakeItBackOracle(Memoryless, TakeItBackOracle):
         row = self.guess(3) - 1
         x_lo, x_hi = base.START_X
         self.start_xy = np.array([(x_lo + x_hi) / 2, base.START_Y_STEP * row + base.START_Y_JITTER / 2])
-
-
-ORACLES: dict[str, type] = {"take_it_back": TakeItBackOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {"take_it_back": MemorylessTakeItBackOracle}

@@ -13,10 +13,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 from mikasa_oracles.waypoints import GRIPPER_CLOSED, Waypoint, WaypointFollower, shown_bulb
 
 
+@register_oracle("timed_transfer")
 class TimedTransferOracle(ScriptedOracle):
     """Scripted solver of TimedTransfer; one instance per env, ``num_envs == 1``."""
 
@@ -81,6 +83,7 @@ class TimedTransferOracle(ScriptedOracle):
         return self.follower.action(tcp_pose)
 
 
+@register_oracle("timed_transfer", memoryless=True)
 class MemorylessTimedTransferOracle(Memoryless, TimedTransferOracle):
     """The TimedTransfer oracle without memory: the step the lamp turned green is wiped
     every step, and it reads no clock (the step count is exactly what the task asks to
@@ -100,7 +103,3 @@ class MemorylessTimedTransferOracle(Memoryless, TimedTransferOracle):
     def _time_to_descend(self) -> bool:
         green = shown_bulb(self.base.lamp) == "green"
         return green and bool(self.draws.random() < 1.0 / float(self.base.DELAY_STEPS))
-
-
-ORACLES: dict[str, type] = {"timed_transfer": TimedTransferOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {"timed_transfer": MemorylessTimedTransferOracle}

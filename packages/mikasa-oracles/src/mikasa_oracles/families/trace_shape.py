@@ -30,6 +30,7 @@ from transforms3d.axangles import axangle2mat
 from transforms3d.quaternions import quat2mat
 
 from mikasa_oracles.controller import move_towards
+from mikasa_oracles.registry import register_oracle
 from mikasa_oracles.scripted import Memoryless, ScriptedOracle
 
 GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
@@ -61,6 +62,7 @@ DROP_STEPS = 3
 Action = np.ndarray
 
 
+@register_oracle("trace_shape", "trace_shape_seq")
 class TraceShapeOracle(ScriptedOracle):
     """Scripted solver of TraceShape / TraceShapeSeq; one instance per env, ``num_envs == 1``."""
 
@@ -221,6 +223,7 @@ class TraceShapeOracle(ScriptedOracle):
         yield from self._move(lambda: np.array([*press_xy, PRESS_Z]), GRIPPER_CLOSED, 0.005, 20, leaning)
 
 
+@register_oracle("trace_shape", "trace_shape_seq", memoryless=True)
 class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
     """The trace oracle without memory: the recorded demonstration is wiped every step, and
     the env's checkpoint and closure latches (hidden: they would say which guessed points
@@ -274,7 +277,3 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
 
     def _unvisited(self, element: int) -> list[int]:
         return list(range(NUM_CHECKPOINTS))
-
-
-ORACLES: dict[str, type] = {"trace_shape": TraceShapeOracle, "trace_shape_seq": TraceShapeOracle}
-MEMORYLESS_ORACLES: dict[str, type] = {"trace_shape": MemorylessTraceShapeOracle, "trace_shape_seq": MemorylessTraceShapeOracle}
