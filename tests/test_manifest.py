@@ -75,3 +75,33 @@ def test_family_groups_name_manifest_families():
     from mikasa_envs.manifest import SELECTION_FAMILIES, SHELL_GAME_FAMILIES, families
 
     assert set(SELECTION_FAMILIES) | set(SHELL_GAME_FAMILIES) <= set(families())
+
+
+def test_every_row_comes_from_its_family_module():
+    """One place per family: each id's row is registered by mikasa_envs/tasks/<family>.py,
+    whose FAMILY declares it, and the env class it registered is the one ManiSkill has."""
+    from mikasa_envs.family import env_class, get_family
+
+    for task in manifest.list_tasks(include_extra=True):
+        cls = env_class(task.env_id)
+        assert cls.__module__ == f"mikasa_envs.tasks.{task.family}", task.env_id
+        assert REGISTERED_ENVS[task.env_id].cls is cls
+        assert get_family(task.family).name == task.family
+        assert cls.LANGUAGE_INSTRUCTION == task.language_instruction
+
+
+def test_family_registry_rejects_bad_rows():
+    from mikasa_envs.family import TaskFamily, TaskSpec, add_task, get_family
+    from mikasa_envs.tasks import remember_color
+
+    row = manifest.get_task("RememberColor3-VLA-v0")
+    with pytest.raises(ValueError, match="registered twice"):
+        add_task(remember_color.FAMILY, row, object, None)
+    with pytest.raises(ValueError, match="declared twice"):
+        add_task(TaskFamily("remember_color"), row, object, None)
+    bad = TaskSpec(**{**vars(row), "env_id": "X-VLA-v0", "split": "Short"})
+    with pytest.raises(ValueError, match="unknown split 'Short'; accepted values: short, medium, long"):
+        add_task(remember_color.FAMILY, bad, object, None)
+    with pytest.raises(KeyError, match="unknown task family 'nope'; known families: .*remember_color"):
+        get_family("nope")
+    assert "X-VLA-v0" not in [t.env_id for t in manifest.list_tasks(include_extra=True)]

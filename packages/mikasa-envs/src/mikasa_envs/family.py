@@ -15,6 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 __all__ = [
+    "DATA_SOURCES",
+    "MEMORY_TYPES",
+    "SPLITS",
     "Chance",
     "ChanceRule",
     "TaskFamily",
@@ -27,6 +30,22 @@ __all__ = [
     "get_family",
     "task_chance",
 ]
+
+
+SPLITS: tuple[str, ...] = ("short", "medium", "long")
+MEMORY_TYPES: tuple[str, ...] = (
+    "Object",
+    "Spatial",
+    "Capacity",
+    "Temporal",
+    "Negative",
+    "Sequential",
+    "Procedural",
+    "Prospective",
+    "Tracking",
+    "Checklist",
+)
+DATA_SOURCES: tuple[str, ...] = ("PPO", "MP")
 
 
 @dataclass(frozen=True)
@@ -96,6 +115,15 @@ def add_task(family: TaskFamily, spec: TaskSpec, env_class: type, number: int | 
     Raises ``ValueError`` for an id or a number given twice, or a second, different
     declaration of a family name.
     """
+    for name, value, accepted in (
+        ("split", spec.split, SPLITS),
+        ("memory type", spec.memory_type, MEMORY_TYPES),
+        ("data source", spec.data_source, DATA_SOURCES),
+    ):
+        if value is not None and value not in accepted:
+            raise ValueError(
+                f"{spec.env_id!r}: unknown {name} {value!r}; accepted values: {', '.join(accepted)}"
+            )
     known = _FAMILIES.setdefault(family.name, family)
     if known is not family:
         raise ValueError(f"task family {family.name!r} is declared twice: {known} and {family}")

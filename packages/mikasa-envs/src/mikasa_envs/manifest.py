@@ -11,22 +11,15 @@ from __future__ import annotations
 
 import difflib
 
-from mikasa_envs.family import TaskSpec, declared_tasks, find_task
-
-SPLITS: tuple[str, ...] = ("short", "medium", "long")
-MEMORY_TYPES: tuple[str, ...] = (
-    "Object",
-    "Spatial",
-    "Capacity",
-    "Temporal",
-    "Negative",
-    "Sequential",
-    "Procedural",
-    "Prospective",
-    "Tracking",
-    "Checklist",
+from mikasa_envs.family import (  # noqa: F401  (SPLITS, MEMORY_TYPES, DATA_SOURCES: re-exported)
+    DATA_SOURCES,
+    MEMORY_TYPES,
+    SPLITS,
+    TaskSpec,
+    declared_tasks,
+    find_task,
 )
-DATA_SOURCES: tuple[str, ...] = ("PPO", "MP")
+
 SELECTION_FAMILIES: tuple[str, ...] = (
     "remember_color",
     "remember_shape",
