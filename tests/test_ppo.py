@@ -15,6 +15,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_ID = "RememberColor3-v0"  # horizon 60
+LAB_NOTES = "docs/lab-notes/rl-ppo-runs"  # the run files and diagnosis scripts of the PPO runs
 
 
 def _load_script(name: str = "ppo_memtasks", folder: str = "legacy/rl/baselines/ppo"):
@@ -191,7 +192,7 @@ def test_lstm_trainer_rejects(ppo_lstm, tmp_path, monkeypatch, flags, error, mat
 
 def _run_file_lines():
     """(trainer, flags) of every run in the run files that side_by_side.sh takes."""
-    for path in sorted((ROOT / "legacy/rl/baselines/run_scripts").glob("*.txt")):
+    for path in sorted((ROOT / "docs/lab-notes/rl-ppo-runs/run_scripts").glob("*.txt")):
         for words in map(str.split, path.read_text().splitlines()):
             if words and not words[0].startswith("#"):  # side_by_side.sh's rule for comments
                 name, trainer, *flags = words
@@ -206,10 +207,11 @@ def test_run_file_lines_parse(ppo, ppo_lstm, trainer, flags):
     assert args.env_id and observation_mode(args)
 
 
-# Each shipped checkpoint with its task's horizon (one eval episode per env). RESULTS.md:
-# RememberColor3-v0 1.00 over 96 episodes, ShellGameTouch-v0 0.93 over 256, RotateLenientPos-v0
-# 0.97 over 256, TakeItBack-v0 0.97 over 256, InterceptMedium-v0 0.95 over 256,
-# RememberColor3-VLA-v0 0.95 over 256, ShellGameTouch-VLA-v0 0.91 over 1,024, BunchOfColors3-v0 0.91 over 768.
+# Each shipped checkpoint with its task's horizon (one eval episode per env). Their figures
+# (legacy/rl/baselines/RESULTS.md): RememberColor3-v0 1.00 over 64 episodes, ShellGameTouch-v0 0.93
+# over 512, InterceptMedium-v0 0.94 over 512, RotateLenientPos-v0 0.96 over 512, TakeItBack-v0 0.97
+# over 512, BunchOfColors3-v0 0.91 over 768, RememberColor3-VLA-v0 0.95 over 512,
+# ShellGameTouch-VLA-v0 0.91 over 1,024.
 SHIPPED_HORIZONS = {"RememberColor3-v0": 60, "ShellGameTouch-v0": 90, "RotateLenientPos-v0": 90,
                     "TakeItBack-v0": 180, "InterceptMedium-v0": 90, "RememberColor3-VLA-v0": 25,
                     "ShellGameTouch-VLA-v0": 30, "BunchOfColors3-v0": 120}
@@ -367,7 +369,7 @@ def test_bunch_diagnosis_reports_touches_and_the_press_per_episode(tmp_path, mon
 
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(88, 8).state_dict(), checkpoint)  # BunchOfColors3-v0's state is 88 floats
-    module = _load_script("diagnose_bunch_of_colors", "legacy/rl/baselines")
+    module = _load_script("diagnose_bunch_of_colors", LAB_NOTES)
     monkeypatch.setattr(sys, "argv", ["diagnose", str(checkpoint), "--episodes", "1"])
     module.main()
     line = capsys.readouterr().out.strip().splitlines()[-1]
@@ -382,7 +384,7 @@ def test_bunch_diagnosis_samples_actions_reproducibly(tmp_path, monkeypatch, cap
 
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(88, 8).state_dict(), checkpoint)
-    module = _load_script("diagnose_bunch_of_colors", "legacy/rl/baselines")
+    module = _load_script("diagnose_bunch_of_colors", LAB_NOTES)
     argv = ["diagnose", str(checkpoint), "--episodes", "1", "--sample", "--min-logstd", "-1", "--first-seed", "7"]
     lines = []
     for _ in range(2):  # torch seed 0 each run: the same sampled episode
@@ -399,7 +401,7 @@ def test_bunch_diagnosis_samples_actions_reproducibly(tmp_path, monkeypatch, cap
 def test_shell_game_touch_diagnosis_reports_reach_and_shove_per_episode(tmp_path, monkeypatch, capsys):
     checkpoint = tmp_path / "untrained.pt"
     torch.save(AgentStateOnly(47, 7).state_dict(), checkpoint)  # ShellGameTouch-VLA-v0: 47 state floats, 7-D ee action
-    module = _load_script("diagnose_shell_game_touch", "legacy/rl/baselines")
+    module = _load_script("diagnose_shell_game_touch", LAB_NOTES)
     monkeypatch.setattr(sys, "argv", ["diagnose", str(checkpoint), "--episodes", "1"])
     module.main()
     episode, summary = capsys.readouterr().out.strip().splitlines()[-2:]
@@ -420,7 +422,7 @@ def test_plot_curves_replaces_its_png_and_json_whole(tmp_path, monkeypatch):
     out = tmp_path / "curves" / "demo"
     out.parent.mkdir()
     out.with_suffix(".json").write_text("{}")  # a curve shipped before: replaced, not appended to
-    module = _load_script("plot_curves", "legacy/rl/baselines")
+    module = _load_script("plot_curves", LAB_NOTES)
     monkeypatch.setattr(sys, "argv", ["plot", str(run), "--labels", "demo", "--tags", "eval/return", "--out", str(out)])
     module.main()
     assert json.loads(out.with_suffix(".json").read_text()) == {"demo": {"eval/return": [[0, 1.0], [100, 2.5], [200, 0.125]]}}

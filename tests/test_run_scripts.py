@@ -9,7 +9,7 @@ import tarfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = ROOT / "legacy/rl/baselines/run_scripts"
+SCRIPTS = ROOT / "docs/lab-notes/rl-ppo-runs/run_scripts"
 
 # Stands in for the trainer: says how it was called, writes a resume.pt as a run does.
 FAKE_TRAINER = """#!/usr/bin/env bash

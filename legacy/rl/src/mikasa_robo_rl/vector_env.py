@@ -84,7 +84,8 @@ class SubEnvSpec:
         # The trainers' normalized_dense is upstream's, dense / its divisor, unclipped.
         # The envs clip theirs to [0, 1] (their published contract), and clipped, every
         # exploring step whose smoothness penalty outweighs the rest is worth exactly 0:
-        # PPO gets no signal (baselines/results/unclipped_reward.md, "The clipped reward trap").
+        # PPO gets no signal (docs/lab-notes/rl-ppo-runs/results/unclipped_reward.md,
+        # "The clipped reward trap").
         upstream_normalized = self.reward_mode == "normalized_dense"
         env = gym.make(
             self.env_id,
