@@ -11,8 +11,9 @@ Plain data: this module imports nothing of the simulator.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 __all__ = [
     "DATA_SOURCES",
@@ -20,10 +21,12 @@ __all__ = [
     "SPLITS",
     "Chance",
     "ChanceRule",
+    "RLVariant",
     "TaskFamily",
     "TaskSpec",
     "add_task",
     "declared_families",
+    "declared_rl_variants",
     "declared_tasks",
     "env_class",
     "find_task",
@@ -78,6 +81,30 @@ ChanceRule = Callable[[type, TaskSpec], Chance]
 
 
 @dataclass(frozen=True)
+class RLVariant:
+    """A task of the original RL release (the ``mikasa-robo-rl`` package), built on one of
+    the family's registered ids with other parameters.
+
+    ``number``: its place in the RL release's manifest (1-32). ``group`` and ``memory_type``:
+    the RL paper's task group and memory type (its 4-type taxonomy). ``reward_divisor``: the
+    divisor of its normalised dense reward. ``oracle_info`` / ``task_cue``: the privileged
+    names of the paper's Table 1. ``overrides``: the class constants it changes (phase timing,
+    the ball kept in view, ...).
+    """
+
+    number: int
+    env_id: str
+    vla_env_id: str
+    group: str
+    memory_type: str
+    max_episode_steps: int
+    reward_divisor: float
+    oracle_info: str
+    task_cue: str | None = None
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class TaskFamily:
     """What the other packages need to know about one task family.
 
@@ -88,6 +115,7 @@ class TaskFamily:
     ``wrapper_table_rank``: (short ids, ``-Long-`` ids) positions of the family in the
     reference's wrapper table, which orders ``MIKASA_VLA_ENV_IDS``; ``None`` for a family
     outside it (its ids come last, in manifest order). ``chance``: its chance rule.
+    ``rl_variants``: its tasks in the original RL release.
     """
 
     name: str
@@ -95,6 +123,7 @@ class TaskFamily:
     frozen_cue_on_short_ids: bool = False
     wrapper_table_rank: tuple[int, int] | None = None
     chance: ChanceRule | None = None
+    rl_variants: tuple[RLVariant, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -146,6 +175,12 @@ def declared_tasks() -> list[TaskSpec]:
 def declared_families() -> dict[str, TaskFamily]:
     """Family name -> declaration, in registration order."""
     return dict(_FAMILIES)
+
+
+def declared_rl_variants() -> list[tuple[TaskFamily, RLVariant]]:
+    """Every declared RL variant with its family, by ``number``."""
+    pairs = [(f, v) for f in _FAMILIES.values() for v in f.rl_variants]
+    return sorted(pairs, key=lambda pair: pair[1].number)
 
 
 def get_family(name: str) -> TaskFamily:

@@ -590,3 +590,14 @@ def color_sequence_chance(env_class: type, task: TaskSpec) -> Chance:
     return Chance(
         1 / orders, f"1/P({colors},{length}) = 1/{orders}: the shown sequence of {length} of {colors} cubes"
     )
+
+
+RL_COLOR_SEQUENCE_TIMING = {
+    "CUE_PHASE_STEPS": (5, 5),
+    "EMPTY_PHASE_STEPS": (5, 5),
+    "CUE_STEP_DURATION": (5, 5),
+}
+"""The RL release's Bunch/Seq/ChainOfColors timing: each cue lasts 5 steps (``STEP_DURATION``;
+Seq/Chain show the cubes one after another, so their cue lasts 5·L), then 5 empty steps
+(``EMPTY_DURATION``). (The release normalises the dense reward by 100 instead of 400, while
+a success step still earns 400: its ``reward_divisor``.)"""

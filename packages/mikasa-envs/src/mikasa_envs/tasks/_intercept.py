@@ -231,3 +231,9 @@ def intercept_chance(env_class: type, task: TaskSpec) -> Chance:
         "its first 10 frames it is out of view until touched, so meeting it without memory "
         "takes a lucky guess of a continuous path",
     )
+
+
+RL_BALL_IN_VIEW = {"BALL_SHOWN_STEPS": None}
+"""The RL release's view: the cameras show the ball in every frame (the VLA ids hide it after
+its first 10 frames until the robot touches it; ``gym.make(id, ball_shown_steps=10)`` does
+that on the RL ids too)."""

@@ -76,6 +76,10 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
     ``_extra_evaluation``.
     """
 
+    # Success counts only once elapsed_steps exceeds it (None: from step 0). The RL release's
+    # RotateLenient sets 5, so that a peg that starts near the target is not a free success.
+    SUCCESS_AFTER_STEP: ClassVar[int | None] = None
+
     MODE: ClassVar[str] = MODE_POS
     PEG_HALF_WIDTH: ClassVar[float] = 0.025
     PEG_HALF_LENGTH: ClassVar[float] = 0.12
@@ -179,6 +183,8 @@ class RotatePegVLABaseEnv(MikasaVLABaseEnv):
         info = dict(relative_angle=relative_angle, y_angle_error=error)
         success = (error.abs() < self.angle_threshold) & self._robot_static
         success = success & self._extra_evaluation(info)
+        if self.SUCCESS_AFTER_STEP is not None:
+            success = success & (self.elapsed_steps > self.SUCCESS_AFTER_STEP)
         return dict(success=success, **info)
 
     def _extra_evaluation(self, info: dict) -> torch.Tensor:

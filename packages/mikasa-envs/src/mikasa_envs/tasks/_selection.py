@@ -519,3 +519,9 @@ def selection_chance(env_class: type, task: TaskSpec) -> Chance:
         "the shown one is one of"
     )
     return Chance(1 / n, f"1/{n}: {which} the {n} objects on the table in the action phase")
+
+
+RL_FIXED_CUE_AND_DELAY = {"CUE_PHASE_STEPS": (5, 5), "EMPTY_PHASE_STEPS": (5, 5)}
+"""The RL release's Remember* timing: the cue shown for 5 steps, then an empty table for 5
+(``TIME_OFFSET = 5``, ``delta_time = 5`` upstream), where the VLA families draw each from
+[1, 5]."""

@@ -519,3 +519,9 @@ class ColorLampShellGameVLABaseEnv(ScriptedShellGameVLABaseEnv):
 def shell_game_chance(env_class: type, task: TaskSpec) -> Chance:
     """Chance rule of the shell games: a uniform guess among the three mugs."""
     return Chance(1 / 3, "1/3: the ball's mug is one of 3 mugs")
+
+
+RL_SHELL_GAME_TIMING = {"CUE_PHASE_STEPS": (5, 5), "EMPTY_PHASE_STEPS": (0, 0)}
+"""The RL release's shell-game clock: the ball is visible while ``elapsed_steps < 5`` (the
+mugs are away), then the mugs stand over the slots; success and reward count from step 5 on
+(the VLA families draw the cue length from [1, 5])."""

@@ -7,15 +7,39 @@ from typing import ClassVar
 import numpy as np
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import ColorSequenceVLABaseEnv, color_set_chance
+from mikasa_envs.tasks._color_sequence import (
+    RL_COLOR_SEQUENCE_TIMING,
+    ColorSequenceVLABaseEnv,
+    color_set_chance,
+)
 
 FAMILY = TaskFamily(
     "bunch_of_colors",
     overlays="memory_capacity",
     wrapper_table_rank=(21, 22),
     chance=color_set_chance,
+    rl_variants=(
+        RLVariant(
+            number=24, env_id="BunchOfColors3-v0", vla_env_id="BunchOfColors3-VLA-v0",
+            group="BunchOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=25, env_id="BunchOfColors5-v0", vla_env_id="BunchOfColors5-VLA-v0",
+            group="BunchOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=26, env_id="BunchOfColors7-v0", vla_env_id="BunchOfColors7-VLA-v0",
+            group="BunchOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+    ),
 )
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import color_sequence_chance
+from mikasa_envs.tasks._color_sequence import RL_COLOR_SEQUENCE_TIMING, color_sequence_chance
 from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
 
 FAMILY = TaskFamily(
@@ -14,6 +14,26 @@ FAMILY = TaskFamily(
     overlays="memory_capacity",
     wrapper_table_rank=(25, 26),
     chance=color_sequence_chance,
+    rl_variants=(
+        RLVariant(
+            number=30, env_id="ChainOfColors3-v0", vla_env_id="ChainOfColors3-VLA-v0",
+            group="ChainOfColors", memory_type="Sequential", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=31, env_id="ChainOfColors5-v0", vla_env_id="ChainOfColors5-VLA-v0",
+            group="ChainOfColors", memory_type="Sequential", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=32, env_id="ChainOfColors7-v0", vla_env_id="ChainOfColors7-VLA-v0",
+            group="ChainOfColors", memory_type="Sequential", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+    ),
 )
 
 

@@ -7,15 +7,37 @@ from typing import Any, ClassVar
 import torch
 
 from mikasa_envs.building_blocks.targets import TARGET_Z, build_target_disc, set_disc_pose
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, intercept_chance, uniform
+from mikasa_envs.tasks._intercept import (
+    RL_BALL_IN_VIEW,
+    InterceptBallVLABaseEnv,
+    intercept_chance,
+    uniform,
+)
 
 FAMILY = TaskFamily(
     "intercept",
     overlays="intercept",
     wrapper_table_rank=(7, 7),
     chance=intercept_chance,
+    rl_variants=(
+        RLVariant(
+            number=4, env_id="InterceptSlow-v0", vla_env_id="InterceptSlow-VLA-v0",
+            group="Intercept", memory_type="Spatial", max_episode_steps=90, reward_divisor=30.0,
+            oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+        RLVariant(
+            number=5, env_id="InterceptMedium-v0", vla_env_id="InterceptMedium-VLA-v0",
+            group="Intercept", memory_type="Spatial", max_episode_steps=90, reward_divisor=30.0,
+            oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+        RLVariant(
+            number=6, env_id="InterceptFast-v0", vla_env_id="InterceptFast-VLA-v0",
+            group="Intercept", memory_type="Spatial", max_episode_steps=90, reward_divisor=30.0,
+            oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+    ),
 )
 
 

@@ -6,15 +6,32 @@ from typing import Any, ClassVar
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._intercept import InterceptBallVLABaseEnv, intercept_chance
+from mikasa_envs.tasks._intercept import RL_BALL_IN_VIEW, InterceptBallVLABaseEnv, intercept_chance
 
 FAMILY = TaskFamily(
     "intercept_grab",
     overlays="intercept",
     wrapper_table_rank=(8, 8),
     chance=intercept_chance,
+    rl_variants=(
+        RLVariant(
+            number=7, env_id="InterceptGrabSlow-v0", vla_env_id="InterceptGrabSlow-VLA-v0",
+            group="InterceptGrab", memory_type="Spatial", max_episode_steps=90,
+            reward_divisor=300.0, oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+        RLVariant(
+            number=8, env_id="InterceptGrabMedium-v0", vla_env_id="InterceptGrabMedium-VLA-v0",
+            group="InterceptGrab", memory_type="Spatial", max_episode_steps=90,
+            reward_divisor=300.0, oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+        RLVariant(
+            number=9, env_id="InterceptGrabFast-v0", vla_env_id="InterceptGrabFast-VLA-v0",
+            group="InterceptGrab", memory_type="Spatial", max_episode_steps=90,
+            reward_divisor=300.0, oracle_info="initial_velocity", overrides=RL_BALL_IN_VIEW,
+        ),
+    ),
 )
 
 

@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import ColorCubesMixin, RememberVLABaseEnv, selection_chance
+from mikasa_envs.tasks._selection import (
+    RL_FIXED_CUE_AND_DELAY,
+    ColorCubesMixin,
+    RememberVLABaseEnv,
+    selection_chance,
+)
 
 FAMILY = TaskFamily(
     "remember_color",
@@ -12,6 +17,23 @@ FAMILY = TaskFamily(
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(12, 13),
     chance=selection_chance,
+    rl_variants=(
+        RLVariant(
+            number=15, env_id="RememberColor3-v0", vla_env_id="RememberColor3-VLA-v0",
+            group="RememberColor", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_color_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=16, env_id="RememberColor5-v0", vla_env_id="RememberColor5-VLA-v0",
+            group="RememberColor", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_color_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=17, env_id="RememberColor9-v0", vla_env_id="RememberColor9-VLA-v0",
+            group="RememberColor", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_color_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+    ),
 )
 
 

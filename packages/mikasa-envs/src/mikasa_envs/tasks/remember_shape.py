@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._selection import BlueShapesMixin, RememberVLABaseEnv, selection_chance
+from mikasa_envs.tasks._selection import (
+    RL_FIXED_CUE_AND_DELAY,
+    BlueShapesMixin,
+    RememberVLABaseEnv,
+    selection_chance,
+)
 
 FAMILY = TaskFamily(
     "remember_shape",
@@ -12,6 +17,23 @@ FAMILY = TaskFamily(
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(14, 15),
     chance=selection_chance,
+    rl_variants=(
+        RLVariant(
+            number=18, env_id="RememberShape3-v0", vla_env_id="RememberShape3-VLA-v0",
+            group="RememberShape", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shape_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=19, env_id="RememberShape5-v0", vla_env_id="RememberShape5-VLA-v0",
+            group="RememberShape", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shape_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=20, env_id="RememberShape9-v0", vla_env_id="RememberShape9-VLA-v0",
+            group="RememberShape", memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shape_indices", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+    ),
 )
 
 

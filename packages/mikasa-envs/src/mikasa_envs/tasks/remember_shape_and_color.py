@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._selection import (
+    RL_FIXED_CUE_AND_DELAY,
     RememberVLABaseEnv,
     ShapeAndColorMixin,
     arc_slots,
@@ -17,6 +18,26 @@ FAMILY = TaskFamily(
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(16, 17),
     chance=selection_chance,
+    rl_variants=(
+        RLVariant(
+            number=21, env_id="RememberShapeAndColor3x2-v0",
+            vla_env_id="RememberShapeAndColor3x2-VLA-v0", group="RememberShapeAndColor",
+            memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shapes_info+true_colors_info", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=22, env_id="RememberShapeAndColor3x3-v0",
+            vla_env_id="RememberShapeAndColor3x3-VLA-v0", group="RememberShapeAndColor",
+            memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shapes_info+true_colors_info", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+        RLVariant(
+            number=23, env_id="RememberShapeAndColor5x3-v0",
+            vla_env_id="RememberShapeAndColor5x3-VLA-v0", group="RememberShapeAndColor",
+            memory_type="Object", max_episode_steps=60, reward_divisor=3.0,
+            oracle_info="true_shapes_info+true_colors_info", overrides=RL_FIXED_CUE_AND_DELAY,
+        ),
+    ),
 )
 
 

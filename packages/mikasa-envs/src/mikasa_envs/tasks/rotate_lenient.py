@@ -6,7 +6,7 @@ from typing import Any
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv, rotate_chance
 
@@ -15,6 +15,20 @@ FAMILY = TaskFamily(
     overlays="rotate",
     wrapper_table_rank=(9, 9),
     chance=rotate_chance,
+    rl_variants=(
+        RLVariant(
+            number=10, env_id="RotateLenientPos-v0", vla_env_id="RotateLenientPos-VLA-v0",
+            group="RotateLenient", memory_type="Spatial", max_episode_steps=90,
+            reward_divisor=25.0, oracle_info="y_angle_diff", task_cue="target_angle",
+            overrides={"SUCCESS_AFTER_STEP": 5},
+        ),
+        RLVariant(
+            number=11, env_id="RotateLenientPosNeg-v0", vla_env_id="RotateLenientPosNeg-VLA-v0",
+            group="RotateLenient", memory_type="Spatial", max_episode_steps=90,
+            reward_divisor=25.0, oracle_info="y_angle_diff", task_cue="target_angle",
+            overrides={"SUCCESS_AFTER_STEP": 5},
+        ),
+    ),
 )
 
 

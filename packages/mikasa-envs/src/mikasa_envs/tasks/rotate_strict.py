@@ -6,7 +6,7 @@ from typing import Any, ClassVar
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEnv, rotate_chance
 
@@ -15,6 +15,18 @@ FAMILY = TaskFamily(
     overlays="rotate",
     wrapper_table_rank=(10, 10),
     chance=rotate_chance,
+    rl_variants=(
+        RLVariant(
+            number=12, env_id="RotateStrictPos-v0", vla_env_id="RotateStrictPos-VLA-v0",
+            group="RotateStrict", memory_type="Object", max_episode_steps=90, reward_divisor=100.0,
+            oracle_info="y_angle_diff", task_cue="target_angle",
+        ),
+        RLVariant(
+            number=13, env_id="RotateStrictPosNeg-v0", vla_env_id="RotateStrictPosNeg-VLA-v0",
+            group="RotateStrict", memory_type="Object", max_episode_steps=90, reward_divisor=100.0,
+            oracle_info="y_angle_diff", task_cue="target_angle",
+        ),
+    ),
 )
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import color_sequence_chance
+from mikasa_envs.tasks._color_sequence import RL_COLOR_SEQUENCE_TIMING, color_sequence_chance
 from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
 
 FAMILY = TaskFamily(
@@ -14,6 +14,26 @@ FAMILY = TaskFamily(
     overlays="memory_capacity",
     wrapper_table_rank=(23, 24),
     chance=color_sequence_chance,
+    rl_variants=(
+        RLVariant(
+            number=27, env_id="SeqOfColors3-v0", vla_env_id="SeqOfColors3-VLA-v0",
+            group="SeqOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=28, env_id="SeqOfColors5-v0", vla_env_id="SeqOfColors5-VLA-v0",
+            group="SeqOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+        RLVariant(
+            number=29, env_id="SeqOfColors7-v0", vla_env_id="SeqOfColors7-VLA-v0",
+            group="SeqOfColors", memory_type="Capacity", max_episode_steps=120,
+            reward_divisor=100.0, oracle_info="true_color_indices",
+            overrides=RL_COLOR_SEQUENCE_TIMING,
+        ),
+    ),
 )
 
 

@@ -6,10 +6,11 @@ from typing import Any, ClassVar
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import (
     MUG_QUAT_HANDLE_TOWARD_ROBOT,
+    RL_SHELL_GAME_TIMING,
     GoalSiteMixin,
     HiddenBallShellGameVLABaseEnv,
     shell_game_chance,
@@ -18,6 +19,13 @@ from mikasa_envs.tasks._shell_game import (
 FAMILY = TaskFamily(
     "shell_game_pick",
     chance=shell_game_chance,
+    rl_variants=(
+        RLVariant(
+            number=3, env_id="ShellGamePick-v0", vla_env_id="ShellGamePick-VLA-v0",
+            group="ShellGame", memory_type="Object", max_episode_steps=90, reward_divisor=75.0,
+            oracle_info="cup_with_ball_number", overrides=RL_SHELL_GAME_TIMING,
+        ),
+    ),
 )
 
 

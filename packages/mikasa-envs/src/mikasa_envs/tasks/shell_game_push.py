@@ -6,9 +6,10 @@ from typing import Any, ClassVar
 
 import torch
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import (
+    RL_SHELL_GAME_TIMING,
     GoalSiteMixin,
     HiddenBallShellGameVLABaseEnv,
     shell_game_chance,
@@ -20,6 +21,13 @@ FAMILY = TaskFamily(
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(1, 1),
     chance=shell_game_chance,
+    rl_variants=(
+        RLVariant(
+            number=2, env_id="ShellGamePush-v0", vla_env_id="ShellGamePush-VLA-v0",
+            group="ShellGame", memory_type="Object", max_episode_steps=90, reward_divisor=4.0,
+            oracle_info="cup_with_ball_number", overrides=RL_SHELL_GAME_TIMING,
+        ),
+    ),
 )
 
 

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from mikasa_envs.family import TaskFamily
+from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._shell_game import (
+    RL_SHELL_GAME_TIMING,
     HiddenBallShellGameVLABaseEnv,
     TouchMugMixin,
     shell_game_chance,
@@ -16,6 +17,13 @@ FAMILY = TaskFamily(
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(0, 0),
     chance=shell_game_chance,
+    rl_variants=(
+        RLVariant(
+            number=1, env_id="ShellGameTouch-v0", vla_env_id="ShellGameTouch-VLA-v0",
+            group="ShellGame", memory_type="Object", max_episode_steps=90, reward_divisor=3.0,
+            oracle_info="cup_with_ball_number", overrides=RL_SHELL_GAME_TIMING,
+        ),
+    ),
 )
 
 

@@ -22,7 +22,7 @@ from mikasa_envs.building_blocks.targets import (
     build_target_disc,
     set_disc_pose,
 )
-from mikasa_envs.family import Chance, TaskFamily, TaskSpec
+from mikasa_envs.family import Chance, RLVariant, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._intercept import SMALL_SCENE_GPU_MEMORY
 
@@ -59,6 +59,13 @@ FAMILY = TaskFamily(
     overlays="intercept",
     wrapper_table_rank=(11, 11),
     chance=take_it_back_chance,
+    rl_variants=(
+        RLVariant(
+            number=14, env_id="TakeItBack-v0", vla_env_id="TakeItBack-VLA-v0", group="TakeItBack",
+            memory_type="Spatial", max_episode_steps=180, reward_divisor=30.0,
+            oracle_info="xyz_initial",
+        ),
+    ),
 )
 
 
