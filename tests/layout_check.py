@@ -20,6 +20,7 @@ import re
 import sys
 import tomllib
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,6 +59,7 @@ class Import:
     names: tuple[str, ...]  # names taken with ``from module import ...`` (empty for ``import``)
 
 
+@cache
 def source_files(package: str) -> dict[str, Path]:
     """Module name -> file, for every module of ``package``."""
     base = PACKAGES[package][1]
@@ -89,6 +91,7 @@ def _imports(module: str, path: Path) -> list[Import]:
     return found
 
 
+@cache
 def all_imports(package: str) -> list[Import]:
     """Every import in ``package`` (module level and inside functions)."""
     return [imp for mod, path in source_files(package).items() for imp in _imports(mod, path)]
