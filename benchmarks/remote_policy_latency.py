@@ -56,7 +56,7 @@ def _stats_ms(ts: list[float]) -> str:
 
 
 def _round_trips(uri: str, n: int) -> None:
-    from mikasa_bench.remote import RemotePolicy
+    from mikasa_bench.policies.remote.client import RemotePolicy
 
     g = torch.Generator().manual_seed(0)
     observations = {
@@ -86,8 +86,8 @@ def _round_trips(uri: str, n: int) -> None:
 def _steps_per_s(task: str, obs_mode: str, episodes: int, uri: str) -> None:
     from mikasa_bench.episode import make_benchmark_env, run_episode
     from mikasa_bench.policies import ZeroPolicy
+    from mikasa_bench.policies.remote.client import RemotePolicy
     from mikasa_bench.protocol import START_SEED, BenchmarkConfig, starts_scene
-    from mikasa_bench.remote import RemotePolicy
 
     env = make_benchmark_env(task, BenchmarkConfig(obs_mode=obs_mode, sim_backend="cpu"))
     try:

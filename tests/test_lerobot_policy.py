@@ -1,5 +1,5 @@
 """LeRobot policies in mikasa-bench: ``mikasa-bench run --policy lerobot:DIR``
-and ``lerobot-eval --env.type=mikasa`` (mikasa_bench.lerobot_policy, mikasa_bench.lerobot_env).
+and ``lerobot-eval --env.type=mikasa`` (mikasa_bench.lerobot.policy, mikasa_bench.lerobot.env).
 
 Needs lerobot 0.4.x next to the MIKASA envs: in the main environment this file contributes
 one test that runs it inside `.venv-datasets` (see tests/test_validate.py for the
@@ -42,7 +42,7 @@ if not IN_LEROBOT_ENV:
             ["lerobot-eval", "--help"],
             [
                 "lerobot-eval",
-                "--env.discover_packages_path=mikasa_bench.lerobot_env",
+                "--env.discover_packages_path=mikasa_bench.lerobot.env",
                 "--env.type=mikasa",
                 "--help",
             ],
@@ -70,7 +70,8 @@ if not IN_LEROBOT_ENV:
             resolve_policy(f"lerobot:{tmp_path}")
         for name in ("model.safetensors", "policy_preprocessor.json", "policy_postprocessor.json"):
             (tmp_path / name).write_text("{}")
-        with pytest.raises(BenchError, match=r'need lerobot 0\.4\.x.*pip install "lerobot'):
+        hint = r"need lerobot 0\.4\.x.*pip install 'mikasa-bench\[lerobot\]'"
+        with pytest.raises(BenchError, match=hint):
             resolve_policy(f"lerobot:{tmp_path}")
         argv = [
             "run",
@@ -87,7 +88,7 @@ if not IN_LEROBOT_ENV:
 else:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    from mikasa_bench.lerobot_policy import import_lerobot
+    from mikasa_bench.lerobot.policy import import_lerobot
 
     import_lerobot()  # torchvision made importable before lerobot's modules below
 
@@ -99,7 +100,7 @@ else:
     from lerobot.policies.factory import make_pre_post_processors
     from mikasa_bench import cli
     from mikasa_bench.errors import BenchError
-    from mikasa_bench.lerobot_policy import (
+    from mikasa_bench.lerobot.policy import (
         STATE_KEY,
         TOP_KEY,
         WRIST_KEY,
@@ -170,13 +171,13 @@ else:
 
     @pytest.fixture(scope="module")
     def eval_run(act_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict:
-        """lerobot-eval's CLI (``python -m mikasa_bench.lerobot_env``'s main, in this process
+        """lerobot-eval's CLI (``python -m mikasa_bench.lerobot.env``'s main, in this process
         to spare a second start-up of torch/lerobot/SAPIEN), with lerobot's plugin discovery
         flag, on the same task and the benchmark's first seed, one episode."""
-        from mikasa_bench.lerobot_env import main
+        from mikasa_bench.lerobot.env import main
 
         out = tmp_path_factory.mktemp("eval") / "out"
-        argv = ["lerobot-eval", "--env.discover_packages_path=mikasa_bench.lerobot_env"]
+        argv = ["lerobot-eval", "--env.discover_packages_path=mikasa_bench.lerobot.env"]
         argv += ["--env.type=mikasa", f"--env.task={TASK}", f"--policy.path={act_dir}"]
         argv += ["--policy.device=cpu", "--eval.n_episodes=1", "--eval.batch_size=1"]
         argv += [f"--seed={SEED}", f"--output_dir={out}"]
@@ -300,7 +301,7 @@ else:
         with pytest.raises(BenchError, match="accepts only 'device'"):
             resolve_policy(f"lerobot:{d}", {"ckpt": "x"})
 
-        from mikasa_bench.lerobot_env import main  # lerobot-eval's entry: the same check
+        from mikasa_bench.lerobot.env import main  # lerobot-eval's entry: the same check
 
         argv = ["lerobot-eval", "--env.type=mikasa", f"--policy.path={d}", "--eval.n_episodes=1"]
         with pytest.MonkeyPatch.context() as mp, pytest.raises(SystemExit) as exit_info:

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from mikasa_bench import cli
 from mikasa_bench.policies import resolve_policy
-from mikasa_bench.remote import PolicyServer
+from mikasa_bench.policies.remote.server import PolicyServer
 from openpi_client.websocket_client_policy import WebsocketClientPolicy
 
 ROOT = Path(__file__).resolve().parents[1]

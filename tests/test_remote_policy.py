@@ -22,9 +22,9 @@ import torch
 from mikasa_bench import cli
 from mikasa_bench.errors import BenchError, EpisodeInterrupted
 from mikasa_bench.policies import resolve_policy
-from mikasa_bench.remote import (
-    PolicyServer,
-    RemotePolicy,
+from mikasa_bench.policies.remote.client import RemotePolicy
+from mikasa_bench.policies.remote.server import PolicyServer
+from mikasa_bench.policies.remote.wire import (
     decode_observation,
     encode_observation,
     packb,

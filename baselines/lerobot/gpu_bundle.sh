@@ -111,7 +111,7 @@ modules = [
     "torchcodec.decoders", "lerobot.datasets.lerobot_dataset", "lerobot.datasets.video_utils",
     "lerobot.policies.act.modeling_act", "lerobot.policies.diffusion.modeling_diffusion",
     "lerobot.policies.factory", "lerobot.scripts.lerobot_train", "lerobot.scripts.lerobot_eval",
-    "mikasa_datasets.lerobot", "mikasa_bench.lerobot_policy", "mikasa_bench.lerobot_env",
+    "mikasa_datasets.lerobot", "mikasa_bench.lerobot.policy", "mikasa_bench.lerobot.env",
 ]
 missing, failed = {}, []
 for name in modules:

@@ -2,7 +2,7 @@
 
     python baselines/lerobot/lerobot_train.py ARGS      # = lerobot-train ARGS
 
-The one addition: ``mikasa_bench.lerobot_policy.import_lerobot()`` runs before lerobot's
+The one addition: ``mikasa_bench.lerobot.policy.import_lerobot()`` runs before lerobot's
 first import. It switches the Hub off (``HF_HUB_OFFLINE=1``) and makes ``torchvision``
 importable where PyPI's CUDA build sits beside a CPU torch (``.venv-datasets``), where plain
 ``lerobot-train`` dies at ``import torchvision``; it changes nothing in lerobot. Everything
@@ -21,7 +21,7 @@ import sys
 
 def main() -> int:
     """Run lerobot-train with ``sys.argv[1:]``; its exit status."""
-    from mikasa_bench.lerobot_policy import import_lerobot
+    from mikasa_bench.lerobot.policy import import_lerobot
 
     import_lerobot()  # offline, torchvision importable: before any lerobot module
     from lerobot.scripts.lerobot_train import main as lerobot_train_main

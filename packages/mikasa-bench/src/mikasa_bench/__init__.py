@@ -22,16 +22,10 @@ from .executor import (
     make_executor,
 )
 from .metrics import newcombe_difference_interval, summarize_task_results, wilson_interval
-from .policies import (
-    BUILTIN_POLICIES,
-    ChunkPolicy,
-    DummyChunkPolicy,
-    PolicySpec,
-    RandomPolicy,
-    ZeroPolicy,
-    build_policy,
-    resolve_policy,
-)
+from .policies.base import ChunkPolicy
+from .policies.builtin import BUILTIN_POLICIES, DummyChunkPolicy, RandomPolicy, ZeroPolicy
+from .policies.loading import build_policy, resolve_policy
+from .policies.spec import PolicySpec
 from .protocol import (
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,

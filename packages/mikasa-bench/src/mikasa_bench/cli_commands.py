@@ -104,8 +104,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     import logging
 
-    from .policies import resolve_policy
-    from .remote import PolicyServer
+    from mikasa_bench.policies.loading import resolve_policy
+    from mikasa_bench.policies.remote.server import PolicyServer
 
     spec = resolve_policy(args.policy, _parse_kwargs(args.policy_kwargs))
     server = PolicyServer(spec, host=args.host, port=args.port)

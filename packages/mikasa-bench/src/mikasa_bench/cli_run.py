@@ -191,9 +191,9 @@ def _resume_hint(stores: Sequence[Any]) -> str:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from mikasa_bench.policies.loading import check_policy_supports, resolve_policy
     from mikasa_bench.results.store import RunStore
 
-    from .policies import check_policy_supports, resolve_policy
     from .tasks import benchmark_commit, make_run_dir, resolve_tasks
 
     executor = _executor_from(args)
@@ -257,9 +257,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
+    from mikasa_bench.policies.loading import resolve_policy
     from mikasa_bench.results.store import RunStore
 
-    from .policies import resolve_policy
     from .tasks import benchmark_commit, resolve_tasks
 
     if args.episodes < 1:

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from mikasa_bench.policies.base import reset_policy
+
 from .errors import PolicyOutputError
-from .policies import reset_policy
 from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 
 __all__ = [

@@ -39,10 +39,12 @@ from functools import partial
 from typing import Any
 
 from mikasa_bench.media.render import apply_environment, check_render_device, worker_environment
+from mikasa_bench.policies.base import policy_chunk_size
+from mikasa_bench.policies.loading import build_policy
+from mikasa_bench.policies.spec import PolicySpec
 
 from .episode import EpisodeResult, RecordedActions, make_benchmark_env, run_episode
 from .errors import BenchError, EpisodeInterrupted
-from .policies import PolicySpec, build_policy, policy_chunk_size
 from .protocol import BenchmarkConfig, scene_start, starts_scene
 from .tasks import BenchmarkTask
 

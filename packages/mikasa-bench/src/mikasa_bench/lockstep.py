@@ -27,7 +27,7 @@ episode missing is played again whole and only the missing episodes are recorded
 A policy that can be evaluated this way has ``forward_batch(observations) -> (B, *A) or
 (B, K, *A)`` (a list of B observation dicts in; one action or a chunk of K per env out)
 and, optionally, ``reset()`` / ``reset(seed)``; it is built once per task in this process
-(a LeRobot policy: `mikasa_bench.lerobot_policy.LeRobotPolicy.forward_batch`).
+(a LeRobot policy: `mikasa_bench.lerobot.policy.LeRobotPolicy.forward_batch`).
 """
 
 from __future__ import annotations
@@ -46,6 +46,8 @@ from typing import Any
 import numpy as np
 
 from mikasa_bench.media.render import apply_environment
+from mikasa_bench.policies.base import policy_chunk_size, reset_policy
+from mikasa_bench.policies.loading import build_policy
 
 from .episode import (
     EpisodeResult,
@@ -63,7 +65,6 @@ from .executor import (
     render_config,
     worker_env_vars,
 )
-from .policies import build_policy, policy_chunk_size, reset_policy
 from .protocol import EPISODES_PER_SCENE, BenchmarkConfig
 
 __all__ = ["LockstepExecutor", "split_action_batch", "scene_groups"]

@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from mikasa_bench.policies.base import policy_chunk_size
 from mikasa_bench.results.files import atomic_write_bytes
 from mikasa_bench.results.store import RunStore
 from mikasa_bench.results.summary import (
@@ -28,7 +29,6 @@ from mikasa_bench.results.summary import (
 from .episode import EpisodeResult, make_benchmark_env, run_episode
 from .errors import EpisodeFailedError
 from .executor import EpisodeJob, Executor
-from .policies import policy_chunk_size
 from .protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
 from .tasks import BenchmarkTask, benchmark_commit
 

@@ -69,7 +69,7 @@ def ensure_torchvision_importable() -> None:
     In ``.venv-datasets`` the same code already runs as a start-up hook (so plain
     ``lerobot-train`` / ``lerobot-eval`` work there); this call makes it work in any other
     environment too. Also used by mikasa-bench's LeRobot policies
-    (`mikasa_bench.lerobot_policy`).
+    (`mikasa_bench.lerobot.policy`).
     """
     torchvision_cpu.ensure_importable()
 

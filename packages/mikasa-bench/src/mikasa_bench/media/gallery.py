@@ -218,7 +218,7 @@ def render_task(
 ) -> dict[str, Any]:
     """Run the oracle for one episode of ``env_id`` and write its animation and card; returns the card."""
     from mikasa_bench.episode import make_benchmark_env, run_episode
-    from mikasa_bench.policies import build_policy, resolve_policy
+    from mikasa_bench.policies.loading import build_policy, resolve_policy
 
     tasks_dir = Path(out_dir) / "tasks"
     tasks_dir.mkdir(parents=True, exist_ok=True)

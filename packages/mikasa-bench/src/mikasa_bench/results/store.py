@@ -22,7 +22,7 @@ from typing import Any
 from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.errors import BenchError
 from mikasa_bench.media.video import video_relpath
-from mikasa_bench.policies import PolicySpec
+from mikasa_bench.policies.spec import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings
 from mikasa_bench.results.files import (
     JOURNAL_FILENAME,

@@ -1,11 +1,11 @@
 """Remote policies: ``mikasa-bench run --policy ws://HOST:PORT`` evaluates a policy served
-over a websocket (``mikasa-bench serve``, `mikasa_bench.remote_server.PolicyServer`, or any
-server speaking openpi's protocol with these keys).
+over a websocket (``mikasa-bench serve``, `mikasa_bench.policies.remote.server.PolicyServer`,
+or any server speaking openpi's protocol with these keys).
 
 A connection: the server sends its metadata (a map) first; then each binary message the
 client sends is one request (`RemotePolicy.request`) and the server answers it with
 ``{"actions": (7,) | (K, 7) | (1, K, 7), "server_timing": {...}}``, or with a text
-message holding its error. Wire format: `mikasa_bench.remote_protocol`.
+message holding its error. Wire format: `mikasa_bench.policies.remote.wire`.
 """
 
 from __future__ import annotations
@@ -20,11 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BenchError, EpisodeInterrupted
-from .policies import ACTION_SHAPE, PolicySpec
-from .remote_protocol import (
-    PROTOCOL_VERSION,
-    decode_observation,
+from mikasa_bench.errors import BenchError, EpisodeInterrupted
+from mikasa_bench.policies.base import ACTION_SHAPE
+from mikasa_bench.policies.remote.wire import (
     describe_value,
     encode_observation,
     packb,
@@ -33,19 +31,9 @@ from .remote_protocol import (
     unpackb,
     uri_with_env_id,
 )
-from .remote_server import PolicyServer
+from mikasa_bench.policies.spec import PolicySpec
 
-__all__ = [
-    "PROTOCOL_VERSION",
-    "PolicyServer",
-    "RemotePolicy",
-    "decode_observation",
-    "encode_observation",
-    "packb",
-    "unpackb",
-    "resolve_remote_policy",
-    "remote_policy_factory",
-]
+__all__ = ["RemotePolicy", "remote_policy_factory", "resolve_remote_policy"]
 
 logger = logging.getLogger(__name__)
 
@@ -74,7 +62,7 @@ class _Socket:
 class RemotePolicy:
     """A policy served elsewhere (``mikasa-bench serve``, openpi's ``WebsocketPolicyServer``
     or any server speaking the same protocol); built per worker by
-    `mikasa_bench.policies.build_policy`.
+    `mikasa_bench.policies.loading.build_policy`.
 
     ``timeout_s``: the longest wait for one reply, and the only clock of a connection (no
     websocket keepalive runs: a server busy computing answers no pings); past it, a
@@ -344,7 +332,7 @@ class RemotePolicy:
 
 
 # ------------------------------------------------------------------------------------
-# policy resolution hooks (mikasa_bench.policies)
+# policy resolution hooks (mikasa_bench.policies.loading)
 # ------------------------------------------------------------------------------------
 
 

@@ -23,17 +23,12 @@ from collections.abc import Callable
 from contextlib import nullcontext
 from typing import Any
 
-from .errors import BenchError
-from .policies import (
-    ACTION_SHAPE,
-    ORACLE_TARGETS,
-    PolicySpec,
-    build_policy,
-    is_remote_target,
-    policy_chunk_size,
-    reset_policy,
-)
-from .remote_protocol import (
+from mikasa_bench.episode import EpisodeRngs
+from mikasa_bench.errors import BenchError
+from mikasa_bench.policies.base import ACTION_SHAPE, policy_chunk_size, reset_policy
+from mikasa_bench.policies.builtin import ORACLE_TARGETS
+from mikasa_bench.policies.loading import build_policy
+from mikasa_bench.policies.remote.wire import (
     DEFAULT_PORT,
     PROTOCOL_VERSION,
     actions_to_numpy,
@@ -43,16 +38,17 @@ from .remote_protocol import (
     require_remote_deps,
     unpackb,
 )
+from mikasa_bench.policies.spec import PolicySpec, is_remote_target
+from mikasa_bench.tasks import load_benchmark_tasks
 
 __all__ = ["PolicyServer"]
 
-logger = logging.getLogger("mikasa_bench.remote")
+# The package's logger: the client (a child, by its module name) logs under it too.
+logger = logging.getLogger("mikasa_bench.policies.remote")
 
 
 @functools.lru_cache(maxsize=1)
 def _manifest_by_id() -> dict[str, Any]:
-    from .tasks import load_benchmark_tasks
-
     return {t.env_id: t for t in load_benchmark_tasks()}
 
 
@@ -227,8 +223,6 @@ class PolicyServer:
 
     def _serve_requests(self, conn: Any, policy: Any) -> None:
         from websockets.exceptions import ConnectionClosed
-
-        from .episode import EpisodeRngs
 
         rngs: EpisodeRngs | None = None
         while True:

@@ -33,8 +33,9 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .errors import BenchError
-from .policies import ACTION_SHAPE, PolicySpec, is_lerobot_target
+from mikasa_bench.errors import BenchError
+from mikasa_bench.policies.base import ACTION_SHAPE
+from mikasa_bench.policies.spec import PolicySpec, is_lerobot_target
 
 __all__ = [
     "LEROBOT_PREFIX",
@@ -79,7 +80,7 @@ MIKASA_OUTPUT_FEATURES: dict[str, tuple[str, tuple[int, ...]]] = {
 """What MIKASA takes: one ``pd_ee_delta_pose`` action of 7 values."""
 
 INSTALL_HINT = (
-    'pip install "lerobot>=0.4,<0.5" mikasa-datasets beside mikasa-bench (on this '
+    "pip install 'mikasa-bench[lerobot]' (lerobot 0.4.x and mikasa-datasets; on this "
     "repository's CPU machines: scripts/setup_datasets_envs.sh, then run "
     ".venv-datasets/bin/mikasa-bench)"
 )

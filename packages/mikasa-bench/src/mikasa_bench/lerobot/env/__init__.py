@@ -4,7 +4,7 @@ lerobot 0.4.4's ``lerobot-eval`` builds its envs with ``lerobot.envs.factory.mak
 Of the ways it offers to add an env, this one works offline with a local install:
 
 * an ``EnvConfig`` subclass registered as ``mikasa`` (`MikasaEnv`), found through
-  lerobot's plugin discovery ``--env.discover_packages_path=mikasa_bench.lerobot_env``
+  lerobot's plugin discovery ``--env.discover_packages_path=mikasa_bench.lerobot.env``
   (``lerobot.configs.parser.load_plugin`` imports a *package* and its submodules, hence
   this package). ``make_env`` then imports `MikasaEnv.package_name` (this package) and
   calls ``gym.make(MikasaEnv.gym_id, **MikasaEnv.gym_kwargs)`` per vector-env slot.
@@ -30,10 +30,10 @@ expects of a single (non-vector) env::
 
 Usage (see packages/mikasa-bench/README.md, "LeRobot policies and lerobot-eval")::
 
-    lerobot-eval --env.discover_packages_path=mikasa_bench.lerobot_env --env.type=mikasa \\
+    lerobot-eval --env.discover_packages_path=mikasa_bench.lerobot.env --env.type=mikasa \\
         --env.task=RememberColor3-VLA-v0 --policy.path=DIR --eval.n_episodes=50 \\
         --eval.batch_size=1 --seed=4242424242
-    python -m mikasa_bench.lerobot_env ...   # the same, after checking the policy's features
+    python -m mikasa_bench.lerobot.env ...   # the same, after checking the policy's features
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from mikasa_bench.episode import first_value
-from mikasa_bench.lerobot_policy import (
+from mikasa_bench.lerobot.policy import (
     ACTION_KEY,
     IMAGE_SIZE,
     STATE_KEY,
@@ -280,7 +280,7 @@ if GYM_ID not in gym.registry:
 
 
 def main() -> None:
-    """``python -m mikasa_bench.lerobot_env ARGS``: ``lerobot-eval ARGS`` with the ``mikasa``
+    """``python -m mikasa_bench.lerobot.env ARGS``: ``lerobot-eval ARGS`` with the ``mikasa``
     env type registered, in a process where torchvision was made importable first.
 
     A ``--policy.path`` whose features do not fit MIKASA stops here, with mikasa-bench's
@@ -290,7 +290,7 @@ def main() -> None:
     from lerobot.scripts.lerobot_eval import main as lerobot_eval_main
 
     from mikasa_bench.errors import BenchError
-    from mikasa_bench.lerobot_policy import load_policy_config
+    from mikasa_bench.lerobot.policy import load_policy_config
 
     path = get_path_arg("policy")
     if path and Path(path).expanduser().is_dir():  # a Hub id is lerobot-eval's to resolve

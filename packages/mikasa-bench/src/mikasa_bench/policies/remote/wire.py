@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BenchError
+from mikasa_bench.errors import BenchError
 
 __all__ = [
     "PROTOCOL_VERSION",

@@ -1,6 +1,0 @@
-"""``python -m mikasa_bench.lerobot_env ARGS`` = ``lerobot-eval ARGS`` with the ``mikasa`` env type."""
-
-from mikasa_bench.lerobot_env import main
-
-if __name__ == "__main__":  # lerobot's plugin loader imports this module too: no run then
-    main()
