@@ -1,19 +1,19 @@
 """The manifest of the 32 RL tasks (the original MIKASA-Robo RL release).
 
-Plain data (``data/tasks.csv``), no simulator import: each row gives the id, its group and
-the MIKASA-Robo-VLA family it is built on, the RL paper's memory type (4-type taxonomy),
-the horizon, the privileged ``oracle_info`` and ``task_cue`` names of the paper's Table 1,
-the divisor of the normalised dense reward and the VLA env it is a variant of.
+Each MIKASA-Robo-VLA family declares its RL variants with its env module
+(`mikasa_envs.family.RLVariant`); this module lists them: the id, its group and the family it
+is built on, the RL paper's memory type (4-type taxonomy), the horizon, the privileged
+``oracle_info`` and ``task_cue`` names of the paper's Table 1, the divisor of the normalised
+dense reward and the VLA env it is a variant of.
 """
 
 from __future__ import annotations
 
-import csv
 import difflib
 from dataclasses import dataclass
 from functools import cache
-from importlib import resources
 
+from mikasa_envs.family import declared_rl_variants
 from mikasa_envs.manifest import UnknownEnvIdError, get_task, list_tasks
 
 MEMORY_TYPES: tuple[str, ...] = ("Object", "Spatial", "Sequential", "Capacity")
@@ -36,20 +36,21 @@ class RLTaskSpec:
 
 @cache
 def _all_tasks() -> tuple[RLTaskSpec, ...]:
-    text = resources.files("mikasa_robo_rl").joinpath("data", "tasks.csv").read_text(encoding="utf-8")
+    import mikasa_envs.tasks  # noqa: F401  (the families declare the variants)
+
     return tuple(
         RLTaskSpec(
-            env_id=row["env_id"],
-            group=row["group"],
-            family=row["family"],
-            memory_type=row["memory_type"],
-            max_episode_steps=int(row["max_episode_steps"]),
-            oracle_info=row["oracle_info"],
-            task_cue=row["task_cue"] or None,
-            reward_divisor=float(row["reward_divisor"]),
-            vla_env_id=row["vla_env_id"],
+            env_id=variant.env_id,
+            group=variant.group,
+            family=family.name,
+            memory_type=variant.memory_type,
+            max_episode_steps=variant.max_episode_steps,
+            oracle_info=variant.oracle_info,
+            task_cue=variant.task_cue,
+            reward_divisor=variant.reward_divisor,
+            vla_env_id=variant.vla_env_id,
         )
-        for row in csv.DictReader(text.splitlines())
+        for family, variant in declared_rl_variants()
     )
 
 
