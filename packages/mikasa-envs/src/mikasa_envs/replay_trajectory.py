@@ -41,8 +41,8 @@ def load_plugins() -> list[str]:
         try:
             entry_point.load()
         except Exception as exc:  # a broken plugin must not stop the replay of other ids
-            warnings.warn(f"mikasa_envs plugin {entry_point.name!r} ({entry_point.value}) failed to load: {exc}",
-                          stacklevel=2)
+            warnings.warn(f"mikasa_envs plugin {entry_point.name!r} ({entry_point.value}) "
+                          f"failed to load: {exc}", stacklevel=2)
         else:
             loaded.append(entry_point.name)
     return loaded

@@ -16,7 +16,6 @@ they are idempotent (evaluating the same state twice changes nothing).
 
 from __future__ import annotations
 
-import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -40,7 +39,6 @@ from mikasa_envs.building_blocks.poses import (
     set_cpu_actor_pose,
     write_actor_poses,
 )
-from mikasa_envs.family import Chance, TaskSpec
 
 NUM_COLORS = 9
 # Frames after the last pinned one leave the cubes free (layout id).
@@ -574,22 +572,6 @@ __all__ = [
     "ColorSequenceVLABaseEnv",
     "layout_arc_xy",
 ]
-
-
-def color_set_chance(env_class: type, task: TaskSpec) -> Chance:
-    """Chance rule of BunchOfColors: a uniform guess of the shown set of L of the cubes."""
-    length, colors = env_class.SEQUENCE_LENGTH, env_class.COLORS
-    sets = math.comb(colors, length)
-    return Chance(1 / sets, f"1/C({colors},{length}) = 1/{sets}: the shown set of {length} of {colors} cubes")
-
-
-def color_sequence_chance(env_class: type, task: TaskSpec) -> Chance:
-    """Chance rule of Seq/ChainOfColors: a uniform guess of the shown sequence of L cubes."""
-    length, colors = env_class.SEQUENCE_LENGTH, env_class.COLORS
-    orders = math.perm(colors, length)
-    return Chance(
-        1 / orders, f"1/P({colors},{length}) = 1/{orders}: the shown sequence of {length} of {colors} cubes"
-    )
 
 
 RL_COLOR_SEQUENCE_TIMING = {

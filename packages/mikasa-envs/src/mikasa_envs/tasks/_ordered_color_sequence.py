@@ -6,11 +6,13 @@ spot, and book touches into order slots, on the machinery of ``_color_sequence.p
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import torch
 
 from mikasa_envs.building_blocks.cubes import CUBE_HALF_SIZE
+from mikasa_envs.family import Chance, TaskSpec
 from mikasa_envs.tasks._color_sequence import ColorSequenceVLABaseEnv
 
 
@@ -89,3 +91,12 @@ class OrderedColorSequenceVLABaseEnv(ColorSequenceVLABaseEnv):
 
 
 __all__ = ["OrderedColorSequenceVLABaseEnv"]
+
+
+def color_sequence_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of Seq/ChainOfColors: a uniform guess of the shown sequence of L cubes."""
+    length, colors = env_class.SEQUENCE_LENGTH, env_class.COLORS
+    orders = math.perm(colors, length)
+    return Chance(
+        1 / orders, f"1/P({colors},{length}) = 1/{orders}: the shown sequence of {length} of {colors} cubes"
+    )

@@ -2,18 +2,26 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import numpy as np
 import torch
 
-from mikasa_envs.family import RLVariant, TaskFamily
+from mikasa_envs.family import Chance, RLVariant, TaskFamily, TaskSpec
 from mikasa_envs.registration import register_task
 from mikasa_envs.tasks._color_sequence import (
     RL_COLOR_SEQUENCE_TIMING,
     ColorSequenceVLABaseEnv,
-    color_set_chance,
 )
+
+
+def color_set_chance(env_class: type, task: TaskSpec) -> Chance:
+    """Chance rule of BunchOfColors: a uniform guess of the shown set of L of the cubes."""
+    length, colors = env_class.SEQUENCE_LENGTH, env_class.COLORS
+    sets = math.comb(colors, length)
+    return Chance(1 / sets, f"1/C({colors},{length}) = 1/{sets}: the shown set of {length} of {colors} cubes")
+
 
 FAMILY = TaskFamily(
     "bunch_of_colors",

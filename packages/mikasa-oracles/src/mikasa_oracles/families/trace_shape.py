@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from mikasa_envs.tasks._trace_shape import (
+from mikasa_envs.tasks.trace_shape import (
     BULB_GREEN,
     BULB_RED,
     CHECKPOINT_STRIDE,
