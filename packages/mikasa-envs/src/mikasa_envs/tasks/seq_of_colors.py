@@ -6,8 +6,11 @@ import torch
 
 from mikasa_envs.family import RLVariant, TaskFamily
 from mikasa_envs.registration import register_task
-from mikasa_envs.tasks._color_sequence import RL_COLOR_SEQUENCE_TIMING, color_sequence_chance
-from mikasa_envs.tasks._ordered_color_sequence import OrderedColorSequenceVLABaseEnv
+from mikasa_envs.tasks._color_sequence import RL_COLOR_SEQUENCE_TIMING
+from mikasa_envs.tasks._ordered_color_sequence import (
+    OrderedColorSequenceVLABaseEnv,
+    color_sequence_chance,
+)
 
 FAMILY = TaskFamily(
     "seq_of_colors",
