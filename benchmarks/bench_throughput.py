@@ -181,7 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("RESULT" + json.dumps(serial_child(json.loads(args._serial_child))), flush=True)
         return 0
 
-    from mikasa_bench.executor import available_cores
+    from mikasa_bench.runners.worker import available_cores
 
     workers = args.workers or available_cores()
     args.workers = workers

@@ -34,10 +34,10 @@ def serial_child(spec: dict[str, Any]) -> dict[str, Any]:
     import mikasa_envs  # noqa: F401  (torch, ManiSkill, the envs: as the workers at start)
 
     logging.getLogger("mani_skill ").setLevel(logging.ERROR)  # ManiSkill's logger name
-    from mikasa_bench.episode import make_benchmark_env, run_episode
     from mikasa_bench.media.render import check_render_device
     from mikasa_bench.policies import ZeroPolicy
     from mikasa_bench.protocol import BenchmarkConfig, starts_scene
+    from mikasa_bench.runners.episode import make_benchmark_env, run_episode
 
     import_s = time.perf_counter() - t_start
     config = BenchmarkConfig(
@@ -99,11 +99,12 @@ def _cpu_s(who: int) -> float:
 def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """`execute_runs` on a fresh run directory with the chosen executor; every outcome is
     recorded on the way through."""
-    from mikasa_bench.executor import EpisodeOutcome, Executor, make_executor
     from mikasa_bench.policies import resolve_policy
     from mikasa_bench.protocol import BenchmarkConfig
     from mikasa_bench.results.store import RunStore
-    from mikasa_bench.runner import execute_runs
+    from mikasa_bench.runners.executor import make_executor
+    from mikasa_bench.runners.jobs import EpisodeOutcome, Executor
+    from mikasa_bench.runners.runner import execute_runs
     from mikasa_bench.tasks import resolve_tasks
 
     class Recording(Executor):
@@ -185,8 +186,8 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
 
 def machine_info() -> dict[str, Any]:
     """Cores, CPU model, GPUs and package versions: what the numbers depend on."""
-    from mikasa_bench.executor import available_cores
     from mikasa_bench.protocol import package_versions
+    from mikasa_bench.runners.worker import available_cores
 
     cpu = platform.processor()
     try:

@@ -84,10 +84,10 @@ def _round_trips(uri: str, n: int) -> None:
 
 
 def _steps_per_s(task: str, obs_mode: str, episodes: int, uri: str) -> None:
-    from mikasa_bench.episode import make_benchmark_env, run_episode
     from mikasa_bench.policies import ZeroPolicy
     from mikasa_bench.policies.remote.client import RemotePolicy
     from mikasa_bench.protocol import START_SEED, BenchmarkConfig, starts_scene
+    from mikasa_bench.runners.episode import make_benchmark_env, run_episode
 
     env = make_benchmark_env(task, BenchmarkConfig(obs_mode=obs_mode, sim_backend="cpu"))
     try:

@@ -9,7 +9,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.policies import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig
 from mikasa_bench.results.store import RunStore
@@ -18,6 +17,7 @@ from mikasa_bench.results.summary import (
     build_task_result,
     write_benchmark_results,
 )
+from mikasa_bench.runners.episode import EpisodeResult
 from mikasa_bench.tasks import BenchmarkTask
 
 SPEC_TASK_KEYS = [

@@ -21,9 +21,7 @@ from bench_helpers import (
     _result,
     _task,
 )
-from mikasa_bench.episode import EpisodeResult, normalize_action_chunk, run_episode
 from mikasa_bench.errors import BenchError, PolicyOutputError, UnknownTaskError
-from mikasa_bench.executor import EpisodeJob
 from mikasa_bench.metrics import (
     newcombe_difference_interval,
     summarize_task_results,
@@ -32,7 +30,9 @@ from mikasa_bench.metrics import (
 from mikasa_bench.policies import PolicySpec, RandomPolicy, ZeroPolicy, resolve_policy
 from mikasa_bench.protocol import BenchmarkConfig
 from mikasa_bench.results.summary import build_summary
-from mikasa_bench.runner import evaluate_benchmark
+from mikasa_bench.runners.episode import EpisodeResult, normalize_action_chunk, run_episode
+from mikasa_bench.runners.jobs import EpisodeJob
+from mikasa_bench.runners.runner import evaluate_benchmark
 from mikasa_bench.tasks import (
     MANIFEST_HEADER,
     BenchmarkTask,
@@ -215,9 +215,9 @@ def test_bad_output_through_executor_names_task_episode_and_seed():
     task = _task()
     config = BenchmarkConfig(n_episodes=1, start_seed=9, sim_backend="cpu")
     job = EpisodeJob(0, task, 0, 9, config, PolicySpec("zero"))
-    import mikasa_bench.executor as ex
+    from mikasa_bench.runners.worker import EpisodeWorker
 
-    worker = ex._EpisodeWorker(0)
+    worker = EpisodeWorker(0)
     worker.env, worker.env_key = FakeEnv(), job.env_key
     worker.policies[job.policy.key()] = Bad()
     out = worker.run(job)

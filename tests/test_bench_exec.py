@@ -15,14 +15,6 @@ import pytest
 import torch
 from mikasa_bench import cli
 from mikasa_bench.errors import BenchError
-from mikasa_bench.executor import (
-    EpisodeJob,
-    InlineExecutor,
-    LocalExecutor,
-    make_executor,
-    render_config,
-    worker_env_vars,
-)
 from mikasa_bench.media.render import LAVAPIPE_ICD_ENV, gym_render_kwargs, worker_environment
 from mikasa_bench.media.video import EpisodeVideo, compose_frame
 from mikasa_bench.policies import PolicySpec
@@ -30,7 +22,10 @@ from mikasa_bench.protocol import BenchmarkConfig, protocol_settings
 from mikasa_bench.results.report import write_report
 from mikasa_bench.results.run_data import load_run
 from mikasa_bench.results.store import RunStore
-from mikasa_bench.runner import execute_runs
+from mikasa_bench.runners.executor import InlineExecutor, LocalExecutor, make_executor
+from mikasa_bench.runners.jobs import EpisodeJob, render_config
+from mikasa_bench.runners.runner import execute_runs
+from mikasa_bench.runners.worker import worker_env_vars
 from mikasa_bench.tasks import BenchmarkTask
 
 TASK = BenchmarkTask("RememberColor3-VLA-v0", "short", "Object", 25, "", "PPO")
@@ -190,7 +185,7 @@ def test_episode_video_encodes_h264(tmp_path):
 
 
 def test_runner_writes_videos_before_journal_and_report_links_them(tmp_path, monkeypatch):
-    import mikasa_bench.executor as ex
+    import mikasa_bench.runners.worker as ex
 
     made = []
 
@@ -245,7 +240,7 @@ def test_video_paths_follow_the_spec():
 
 
 def test_envs_per_process_default_follows_the_render_device(monkeypatch):
-    from mikasa_bench import executor
+    from mikasa_bench.runners import executor
 
     gpu = BenchmarkConfig(render_device="gpu")
     cpu = BenchmarkConfig(render_device="cpu")

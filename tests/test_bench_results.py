@@ -10,14 +10,15 @@ from pathlib import Path
 import pytest
 from bench_helpers import FakeEnv, _result, _store, _task, _write_run
 from mikasa_bench import cli
-from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.errors import BenchError
-from mikasa_bench.executor import InlineExecutor, _Scheduler
 from mikasa_bench.results.compare import compare_runs
 from mikasa_bench.results.report import REPORT_HTML, REPORT_MD, write_report
 from mikasa_bench.results.run_data import load_run
 from mikasa_bench.results.store import RunStore
-from mikasa_bench.runner import _jobs_for
+from mikasa_bench.runners.episode import EpisodeResult
+from mikasa_bench.runners.executor import InlineExecutor
+from mikasa_bench.runners.runner import _jobs_for
+from mikasa_bench.runners.scheduler import Scheduler
 
 # --------------------------------------------------------------------------------------
 # run store: seed order, resume bookkeeping
@@ -53,14 +54,14 @@ def test_jobs_are_task_major_and_seeded(tmp_path):
         ("Find", 0, 1000),
         ("Find", 1, 1001),
     ]
-    sched = _Scheduler(jobs)
+    sched = Scheduler(jobs)
     first = sched.next_for(None)
     assert sched.next_for(first).episode == 1  # stays on the env (and scene) it has
 
 
 def test_scheduler_spreads_new_workers_over_tasks(tmp_path):
     jobs = _jobs_for([_store(tmp_path, n=3)])
-    sched = _Scheduler(jobs)
+    sched = Scheduler(jobs)
     a, b = sched.next_for(None), sched.next_for(None)
     assert a.task.env_id != b.task.env_id  # two workers, two envs: not both on task 1
     rest = [sched.next_for(a)]
@@ -75,7 +76,7 @@ def test_scheduler_spreads_new_workers_over_tasks(tmp_path):
 
 def test_scheduler_keeps_each_scene_on_one_worker_in_order(tmp_path):
     jobs = _jobs_for([_store(tmp_path, n=12)])  # 2 tasks x 12 episodes: 3 scenes each
-    sched = _Scheduler(jobs)
+    sched = Scheduler(jobs)
     workers: dict[int, list] = {w: [] for w in range(5)}
     last = dict.fromkeys(workers)
     while True:
@@ -173,13 +174,13 @@ def test_fresh_run_refuses_non_empty_dir_and_resume_checks_protocol(tmp_path):
 
 
 def test_inline_executor_runs_jobs_in_order(tmp_path, monkeypatch):
-    import mikasa_bench.executor as ex
+    import mikasa_bench.runners.worker as ex
 
     monkeypatch.setattr(
         ex, "make_benchmark_env", lambda env_id, cfg: FakeEnv(horizon=2, success_step=2)
     )
     store = _store(tmp_path, n=2)
-    from mikasa_bench.runner import execute_runs
+    from mikasa_bench.runners.runner import execute_runs
 
     summaries = execute_runs([store], InlineExecutor(), progress=False)
     assert summaries[0]["complete"] and summaries[0]["sr_split"] == 1.0

@@ -95,7 +95,8 @@ def test_env_threads_keep_global_rng_policies_reproducible(tmp_path):
 def test_an_episode_does_not_depend_on_what_its_worker_played_before():
     # PhysX keeps contact caches across resets; the protocol fixes each episode's history
     # (a fresh scene every 5 episodes, in order), and a worker replays what it lacks.
-    from mikasa_bench.executor import EpisodeJob, _EpisodeWorker
+    from mikasa_bench.runners.jobs import EpisodeJob
+    from mikasa_bench.runners.worker import EpisodeWorker
 
     config = BenchmarkConfig(n_episodes=7, obs_mode="state", sim_backend="cpu")
     task = resolve_tasks(env_ids=["RememberShapeAndColor5x3-VLA-v0"]).tasks[0]
@@ -103,7 +104,7 @@ def test_an_episode_does_not_depend_on_what_its_worker_played_before():
     jobs = [EpisodeJob(0, task, i, seed, config, policy) for i, seed in enumerate(config.episode_seeds())]
 
     def play(order):
-        worker = _EpisodeWorker(0)
+        worker = EpisodeWorker(0)
         try:
             return {i: worker.run(jobs[i]).result for i in order}
         finally:
@@ -243,8 +244,8 @@ def _journal(run_dir: Path) -> list[dict]:
 def test_video_env_observes_and_scores_like_the_canonical_env():
     """The video chain (render_mode rgb_array + overlays, render() before every step)
     gives bit-identical rgb observations, proprio and rewards."""
-    from mikasa_bench.episode import make_benchmark_env
     from mikasa_bench.media.video import compose_frame
+    from mikasa_bench.runners.episode import make_benchmark_env
 
     plain = make_benchmark_env(TASK, BenchmarkConfig(n_episodes=1, sim_backend="cpu"))
     video = make_benchmark_env(
@@ -275,7 +276,7 @@ def test_video_run_records_one_mp4_per_episode_with_unchanged_results(baseline, 
     out = tmp_path / "video"
     argv = [a for a in COMMON if a != "--no-report"]
     # In this process (--workers 0): the rgb test above already paid lavapipe's one-off
-    # pipeline compilation here; the worker path is the same `_EpisodeWorker`.
+    # pipeline compilation here; the worker path is the same `EpisodeWorker`.
     argv += ["--policy", "oracle", "--workers", "0", "--video", "--out", str(out)]
     assert cli.main(["run", *argv]) == 0
     a, b = _task_json(baseline), _task_json(out)

@@ -1,4 +1,4 @@
-"""Batched evaluation (`mikasa-bench run --policy-batch B`, `mikasa_bench.lockstep`): which
+"""Batched evaluation (`mikasa-bench run --policy-batch B`, `mikasa_bench.runners.lockstep`): which
 episodes share a round, the checks of a batched policy's output, and that a deterministic
 policy gets the same per-episode results in lockstep as one episode at a time (state
 observations, one short task), also after a resume. The policies are loaded from this file
@@ -14,8 +14,8 @@ import pytest
 import torch
 from mikasa_bench import cli
 from mikasa_bench.errors import BenchError, PolicyOutputError
-from mikasa_bench.lockstep import scene_groups, split_action_batch
 from mikasa_bench.protocol import BenchmarkConfig, protocol_settings
+from mikasa_bench.runners.lockstep import scene_groups, split_action_batch
 
 TASK = "RememberColor3-VLA-v0"
 HERE = str(Path(__file__).resolve())

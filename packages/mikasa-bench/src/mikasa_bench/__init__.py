@@ -5,21 +5,12 @@ Library: the protocol constants, task selection, the policy interface, the episo
 the parallel resumable runner and the result/report helpers are re-exported here.
 """
 
-from .episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
 from .errors import (
     BenchError,
     EpisodeFailedError,
     EpisodeInterrupted,
     PolicyOutputError,
     UnknownTaskError,
-)
-from .executor import (
-    EpisodeJob,
-    EpisodeOutcome,
-    Executor,
-    InlineExecutor,
-    LocalExecutor,
-    make_executor,
 )
 from .metrics import newcombe_difference_interval, summarize_task_results, wilson_interval
 from .policies.base import ChunkPolicy
@@ -39,7 +30,10 @@ from .protocol import (
 from .results.run_data import RunData, load_run
 from .results.store import RunStore
 from .results.summary import build_summary, build_task_result, write_benchmark_results
-from .runner import evaluate_benchmark, evaluate_task, execute_runs
+from .runners.episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
+from .runners.executor import InlineExecutor, LocalExecutor, make_executor
+from .runners.jobs import EpisodeJob, EpisodeOutcome, Executor
+from .runners.runner import evaluate_benchmark, evaluate_task, execute_runs
 from .tasks import (
     BenchmarkTask,
     benchmark_commit,

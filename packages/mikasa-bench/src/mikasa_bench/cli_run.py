@@ -96,7 +96,7 @@ def _resume_dirs(path: str) -> list[Path]:
 def _executor_from(args: argparse.Namespace) -> Any:
     """The executor the options ask for (raises on a bad combination, before anything is
     written)."""
-    from .executor import make_executor
+    from mikasa_bench.runners.executor import make_executor
 
     return make_executor(
         args.executor, args.workers, address=args.address, envs_per_worker=args.envs_per_worker
@@ -105,7 +105,7 @@ def _executor_from(args: argparse.Namespace) -> Any:
 
 def _lockstep_executor(args: argparse.Namespace, batch: int) -> Any:
     """The executor of a ``--policy-batch`` run (its envs are its own processes)."""
-    from .lockstep import LockstepExecutor
+    from mikasa_bench.runners.lockstep import LockstepExecutor
 
     given = [
         flag
@@ -134,8 +134,7 @@ def _execute_and_report(
 ) -> int:
     from mikasa_bench.results.report import text_table, write_report
     from mikasa_bench.results.run_data import load_run
-
-    from .runner import execute_runs
+    from mikasa_bench.runners.runner import execute_runs
 
     executor = executor if executor is not None else _executor_from(args)
     if any(s.config.policy_batch > 1 for s in stores):

@@ -95,7 +95,7 @@ class BenchmarkConfig:
     ``save_videos`` records one mp4 per episode (scene view with the task's overlays beside
     the two cameras); it only changes ``render()`` frames, never observations or results.
     ``policy_batch`` > 1 plays that many episodes in lockstep with one policy call per step
-    for all (`mikasa_bench.lockstep`): a stochastic policy's draws then depend on it.
+    for all (`mikasa_bench.runners.lockstep`): a stochastic policy's draws then depend on it.
     """
 
     start_seed: int = START_SEED

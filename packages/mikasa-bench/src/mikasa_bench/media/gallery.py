@@ -217,8 +217,8 @@ def render_task(
     env_id: str, out_dir: str | Path, seed: int, scale: int = 1, max_frames: int = 120
 ) -> dict[str, Any]:
     """Run the oracle for one episode of ``env_id`` and write its animation and card; returns the card."""
-    from mikasa_bench.episode import make_benchmark_env, run_episode
     from mikasa_bench.policies.loading import build_policy, resolve_policy
+    from mikasa_bench.runners.episode import make_benchmark_env, run_episode
 
     tasks_dir = Path(out_dir) / "tasks"
     tasks_dir.mkdir(parents=True, exist_ok=True)
@@ -251,8 +251,8 @@ def render_task(
 def _init_worker(worker_config: BenchmarkConfig, n_workers: int) -> None:
     """Each worker renders as the bench's pool workers do (`worker_env_vars`: its device,
     its share of the cores, one GPU)."""
-    from mikasa_bench.executor import worker_env_vars
     from mikasa_bench.media.render import apply_environment
+    from mikasa_bench.runners.worker import worker_env_vars
 
     apply_environment(worker_env_vars(worker_config, 0, n_workers))
     from mikasa_envs.workers import use_one_gpu  # after the Vulkan restriction: loads ManiSkill

@@ -19,7 +19,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.episode import EpisodeResult
 from mikasa_bench.errors import BenchError
 from mikasa_bench.media.video import video_relpath
 from mikasa_bench.policies.spec import PolicySpec
@@ -34,6 +33,7 @@ from mikasa_bench.results.files import (
     read_json,
 )
 from mikasa_bench.results.summary import build_summary, build_task_result
+from mikasa_bench.runners.episode import EpisodeResult
 from mikasa_bench.tasks import BenchmarkTask
 
 __all__ = ["RunStore", "RUN_FORMAT"]

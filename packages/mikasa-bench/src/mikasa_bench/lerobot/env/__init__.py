@@ -43,7 +43,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.episode import first_value
 from mikasa_bench.lerobot.policy import (
     ACTION_KEY,
     IMAGE_SIZE,
@@ -53,6 +52,7 @@ from mikasa_bench.lerobot.policy import (
     import_lerobot,
     task_instruction,
 )
+from mikasa_bench.runners.episode import first_value
 
 import_lerobot()  # before lerobot's first import: offline, torchvision importable
 
@@ -172,13 +172,13 @@ class MikasaLeRobotEnv(gym.Env):
     ) -> None:
         import torch
 
-        from mikasa_bench.episode import make_benchmark_env
         from mikasa_bench.media.render import (
             apply_environment,
             check_render_device,
             worker_environment,
         )
         from mikasa_bench.protocol import BenchmarkConfig
+        from mikasa_bench.runners.episode import make_benchmark_env
 
         # As mikasa-bench's workers: restrict Vulkan to lavapipe before the first env of
         # the process when rendering on the CPU is asked for (no-op otherwise).

@@ -23,7 +23,6 @@ from collections.abc import Callable
 from contextlib import nullcontext
 from typing import Any
 
-from mikasa_bench.episode import EpisodeRngs
 from mikasa_bench.errors import BenchError
 from mikasa_bench.policies.base import ACTION_SHAPE, policy_chunk_size, reset_policy
 from mikasa_bench.policies.builtin import ORACLE_TARGETS
@@ -39,6 +38,7 @@ from mikasa_bench.policies.remote.wire import (
     unpackb,
 )
 from mikasa_bench.policies.spec import PolicySpec, is_remote_target
+from mikasa_bench.runners.episode import EpisodeRngs
 from mikasa_bench.tasks import load_benchmark_tasks
 
 __all__ = ["PolicyServer"]

@@ -44,28 +44,20 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-
+from mikasa_bench.errors import BenchError, PolicyOutputError
 from mikasa_bench.media.render import apply_environment
 from mikasa_bench.policies.base import policy_chunk_size, reset_policy
 from mikasa_bench.policies.loading import build_policy
-
-from .episode import (
+from mikasa_bench.protocol import EPISODES_PER_SCENE, BenchmarkConfig
+from mikasa_bench.runners.episode import (
     EpisodeResult,
     first_value,
     normalize_action_chunk,
     seed_global_rngs,
 )
-from .errors import BenchError, PolicyOutputError
-from .executor import (
-    EpisodeJob,
-    EpisodeOutcome,
-    Executor,
-    envs_per_process,
-    make_worker_env,
-    render_config,
-    worker_env_vars,
-)
-from .protocol import EPISODES_PER_SCENE, BenchmarkConfig
+from mikasa_bench.runners.executor import envs_per_process
+from mikasa_bench.runners.jobs import EpisodeJob, EpisodeOutcome, Executor, render_config
+from mikasa_bench.runners.worker import make_worker_env, worker_env_vars
 
 __all__ = ["LockstepExecutor", "split_action_batch", "scene_groups"]
 

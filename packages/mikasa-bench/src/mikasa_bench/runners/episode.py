@@ -15,11 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
+from mikasa_bench.errors import PolicyOutputError
 from mikasa_bench.policies.base import reset_policy
-
-from .errors import PolicyOutputError
-from .protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
+from mikasa_bench.protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 
 __all__ = [
     "EpisodeResult",
@@ -296,9 +294,8 @@ def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> An
     """The non-canonical ``obs_mode="state"`` chain (`mikasa_wrappers.apply_mikasa_vla_state_wrappers`):
     the canonical action path and 7-value ``proprio``, the flat privileged ``state`` vector
     in place of the images."""
+    from mikasa_bench.errors import UnknownTaskError
     from mikasa_wrappers import VLA_WRAPPER_CONFIGS, apply_mikasa_vla_state_wrappers
-
-    from .errors import UnknownTaskError
 
     if env_id not in VLA_WRAPPER_CONFIGS:
         raise UnknownTaskError(f"env id {env_id!r} has no canonical wrapper configuration")
@@ -319,7 +316,6 @@ def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> An
     """
     import gymnasium as gym
     import mikasa_envs  # noqa: F401  (registers the envs)
-
     from mikasa_bench.media.render import gym_render_kwargs
 
     config = config or BenchmarkConfig()

@@ -1,11 +1,11 @@
 """The Ray executor: episodes on the workers of a Ray cluster (``--executor ray``).
 
 For users who outgrow one machine. Each Ray actor is one worker exactly like a process of
-the local pool (`_EpisodeWorker`): it owns one env, builds it once per task and reuses it
+the local pool (`EpisodeWorker`): it owns one env, builds it once per task and reuses it
 for every episode of that task it gets, builds the policy in-process after the env, and
 returns an `EpisodeOutcome` (with the mp4 bytes when recording videos). Jobs are handed out
 one at a time per actor, preferring the task the actor already has an env for (the local
-executor's `_Scheduler`), and the runner puts results back in seed order, so the numbers
+executor's `Scheduler`), and the runner puts results back in seed order, so the numbers
 are the ones the local executor gives.
 
 Placement (`mikasa_envs.ray_actors`, shared with mikasa-oracles' collector): actors ask
@@ -28,24 +28,17 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
+from mikasa_bench.errors import BenchError
+from mikasa_bench.media.render import apply_environment, worker_environment
+from mikasa_bench.runners.jobs import EpisodeJob, EpisodeOutcome, Executor, render_config
+from mikasa_bench.runners.scheduler import Scheduler
+from mikasa_bench.runners.worker import EpisodeWorker
 from mikasa_envs.ray_actors import (
     RayStartError,
     actor_options,
     equal_gpu_share,
     init_ray,
     wait_until_ready,
-)
-
-from mikasa_bench.media.render import apply_environment, worker_environment
-
-from .errors import BenchError
-from .executor import (
-    EpisodeJob,
-    EpisodeOutcome,
-    Executor,
-    _EpisodeWorker,
-    _Scheduler,
-    render_config,
 )
 
 __all__ = ["RayExecutor", "import_ray"]
@@ -62,7 +55,7 @@ def import_ray() -> Any:
 
 
 class _RayWorker:
-    """Body of a Ray actor: one `_EpisodeWorker` in a dedicated Ray worker process."""
+    """Body of a Ray actor: one `EpisodeWorker` in a dedicated Ray worker process."""
 
     def __init__(self, worker_id: int, env_vars: Mapping[str, str]) -> None:
         # Before anything can initialise Vulkan: the render device's driver restriction.
@@ -70,7 +63,7 @@ class _RayWorker:
         from mikasa_envs.workers import quiet_worker
 
         quiet_worker(one_raster_thread=False)
-        self.worker = _EpisodeWorker(worker_id)
+        self.worker = EpisodeWorker(worker_id)
 
     def ready(self) -> str:
         """Returns the node's host name once the actor is up."""
@@ -180,7 +173,7 @@ class RayExecutor(Executor):
     def _schedule(
         ray: Any, actors: Sequence[Any], jobs: Sequence[EpisodeJob]
     ) -> Iterator[EpisodeOutcome]:
-        scheduler = _Scheduler(jobs)
+        scheduler = Scheduler(jobs)
         in_flight: dict[Any, tuple[int, EpisodeJob]] = {}
         last: list[EpisodeJob | None] = [None] * len(actors)
 

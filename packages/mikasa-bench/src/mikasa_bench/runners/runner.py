@@ -17,7 +17,9 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
+from mikasa_bench.errors import EpisodeFailedError
 from mikasa_bench.policies.base import policy_chunk_size
+from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
 from mikasa_bench.results.files import atomic_write_bytes
 from mikasa_bench.results.store import RunStore
 from mikasa_bench.results.summary import (
@@ -25,12 +27,9 @@ from mikasa_bench.results.summary import (
     build_task_result,
     write_benchmark_results,
 )
-
-from .episode import EpisodeResult, make_benchmark_env, run_episode
-from .errors import EpisodeFailedError
-from .executor import EpisodeJob, Executor
-from .protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
-from .tasks import BenchmarkTask, benchmark_commit
+from mikasa_bench.runners.episode import EpisodeResult, make_benchmark_env, run_episode
+from mikasa_bench.runners.jobs import EpisodeJob, Executor
+from mikasa_bench.tasks import BenchmarkTask, benchmark_commit
 
 __all__ = ["execute_runs", "evaluate_task", "evaluate_benchmark"]
 
