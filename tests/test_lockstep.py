@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 from mikasa_bench import cli
+from mikasa_bench.cli.run import cmd_run
 from mikasa_bench.errors import BenchError, PolicyOutputError
 from mikasa_bench.protocol import BenchmarkConfig, protocol_settings
 from mikasa_bench.runners.lockstep import scene_groups, split_action_batch
@@ -153,6 +154,6 @@ def test_lockstep_resume_replays_the_group_and_records_the_missing(tmp_path):
     assert cli.main(["run", "--resume", str(part), "--no-progress", "--no-report"]) == 0
     assert _episodes(part) == _episodes(full)
     with pytest.raises(BenchError, match="do not pass --policy-batch"):
-        cli._cmd_run(
+        cmd_run(
             cli.build_parser().parse_args(["run", "--resume", str(part), "--policy-batch", "2"])
         )

@@ -32,9 +32,16 @@ from typing import Any
 
 import numpy as np
 
+from mikasa_bench.chance import task_chance
+from mikasa_bench.errors import BenchError
 from mikasa_bench.media.gallery_html import write_index
-from mikasa_bench.protocol import BenchmarkConfig
+from mikasa_bench.media.render import apply_environment
+from mikasa_bench.policies.loading import build_policy, resolve_policy
+from mikasa_bench.protocol import START_SEED, SUPPORTED_SPLITS, BenchmarkConfig
 from mikasa_bench.results.files import atomic_write_bytes, atomic_write_json
+from mikasa_bench.runners.episode import make_benchmark_env, run_episode
+from mikasa_bench.runners.worker import worker_env_vars
+from mikasa_bench.tasks import registered_env_ids, resolve_tasks
 
 __all__ = [
     "PHASE_COLORS",
@@ -193,8 +200,6 @@ def task_card(env_id: str, env: Any) -> dict[str, Any]:
     """What the page says about ``env_id`` (``env``: the made env, for its class)."""
     from mikasa_envs.manifest import get_task
 
-    from mikasa_bench.chance import task_chance
-
     spec, chance = get_task(env_id), task_chance(env_id)
     base = env.unwrapped
     sections = _docstring_sections(type(base))
@@ -217,9 +222,6 @@ def render_task(
     env_id: str, out_dir: str | Path, seed: int, scale: int = 1, max_frames: int = 120
 ) -> dict[str, Any]:
     """Run the oracle for one episode of ``env_id`` and write its animation and card; returns the card."""
-    from mikasa_bench.policies.loading import build_policy, resolve_policy
-    from mikasa_bench.runners.episode import make_benchmark_env, run_episode
-
     tasks_dir = Path(out_dir) / "tasks"
     tasks_dir.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
@@ -251,9 +253,6 @@ def render_task(
 def _init_worker(worker_config: BenchmarkConfig, n_workers: int) -> None:
     """Each worker renders as the bench's pool workers do (`worker_env_vars`: its device,
     its share of the cores, one GPU)."""
-    from mikasa_bench.media.render import apply_environment
-    from mikasa_bench.runners.worker import worker_env_vars
-
     apply_environment(worker_env_vars(worker_config, 0, n_workers))
     from mikasa_envs.workers import use_one_gpu  # after the Vulkan restriction: loads ManiSkill
 
@@ -319,8 +318,6 @@ def build_gallery(
 
 def add_gallery_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``gallery`` subcommand to an argparse subparsers object."""
-    from mikasa_bench.protocol import START_SEED, SUPPORTED_SPLITS
-
     p = sub.add_parser(
         "gallery",
         help="animations of the oracle solving each task, and an HTML page describing them",
@@ -361,9 +358,6 @@ def add_gallery_parser(sub: Any) -> argparse.ArgumentParser:
 
 def run_gallery(args: argparse.Namespace) -> int:
     """The ``gallery`` subcommand; returns the exit code (0, or 2 on bad input)."""
-    from mikasa_bench.errors import BenchError
-    from mikasa_bench.tasks import registered_env_ids, resolve_tasks
-
     try:
         if args.task or args.split:
             env_ids = [t.env_id for t in resolve_tasks(split=args.split, env_ids=args.task).tasks]

@@ -15,7 +15,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from mikasa_bench.errors import PolicyOutputError
+
+from mikasa_bench.errors import PolicyOutputError, UnknownTaskError
+from mikasa_bench.media.render import gym_render_kwargs
+from mikasa_bench.media.video import compose_frame
 from mikasa_bench.policies.base import reset_policy
 from mikasa_bench.protocol import NUM_ENVS, OBS_MODE, BenchmarkConfig
 
@@ -235,8 +238,6 @@ def run_episode(
     sink = frame_sink
     if frames is not None:
         sink = frames.append if frame_sink is None else _tee(frames.append, frame_sink)
-    if sink is not None:
-        from mikasa_bench.media.video import compose_frame
 
     queue: deque[Any] = deque()
     chunk_sizes: set[int] = set()
@@ -294,7 +295,6 @@ def _state_chain(env: Any, env_id: str, *, include_overlays: bool = False) -> An
     """The non-canonical ``obs_mode="state"`` chain (`mikasa_wrappers.apply_mikasa_vla_state_wrappers`):
     the canonical action path and 7-value ``proprio``, the flat privileged ``state`` vector
     in place of the images."""
-    from mikasa_bench.errors import UnknownTaskError
     from mikasa_wrappers import VLA_WRAPPER_CONFIGS, apply_mikasa_vla_state_wrappers
 
     if env_id not in VLA_WRAPPER_CONFIGS:
@@ -316,7 +316,6 @@ def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> An
     """
     import gymnasium as gym
     import mikasa_envs  # noqa: F401  (registers the envs)
-    from mikasa_bench.media.render import gym_render_kwargs
 
     config = config or BenchmarkConfig()
     rgb = config.obs_mode == OBS_MODE

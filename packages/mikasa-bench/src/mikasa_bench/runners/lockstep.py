@@ -44,6 +44,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+
 from mikasa_bench.errors import BenchError, PolicyOutputError
 from mikasa_bench.media.render import apply_environment
 from mikasa_bench.policies.base import policy_chunk_size, reset_policy

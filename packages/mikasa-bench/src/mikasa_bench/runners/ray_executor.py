@@ -28,11 +28,6 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
-from mikasa_bench.errors import BenchError
-from mikasa_bench.media.render import apply_environment, worker_environment
-from mikasa_bench.runners.jobs import EpisodeJob, EpisodeOutcome, Executor, render_config
-from mikasa_bench.runners.scheduler import Scheduler
-from mikasa_bench.runners.worker import EpisodeWorker
 from mikasa_envs.ray_actors import (
     RayStartError,
     actor_options,
@@ -40,6 +35,12 @@ from mikasa_envs.ray_actors import (
     init_ray,
     wait_until_ready,
 )
+
+from mikasa_bench.errors import BenchError
+from mikasa_bench.media.render import apply_environment, worker_environment
+from mikasa_bench.runners.jobs import EpisodeJob, EpisodeOutcome, Executor, render_config
+from mikasa_bench.runners.scheduler import Scheduler
+from mikasa_bench.runners.worker import EpisodeWorker
 
 __all__ = ["RayExecutor", "import_ray"]
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mikasa_bench.errors import EpisodeFailedError
+from mikasa_bench.media.video import EpisodeVideo
 from mikasa_bench.policies.base import policy_chunk_size
 from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
 from mikasa_bench.results.files import atomic_write_bytes
@@ -162,8 +163,6 @@ def evaluate_task(
         episodes = []
         for i, seed in enumerate(config.episode_seeds()):
             if video_dir is not None:
-                from mikasa_bench.media.video import EpisodeVideo
-
                 with EpisodeVideo() as recorder:
                     result, _ = run_episode(
                         env, policy, seed, frame_sink=recorder.add, fresh_scene=starts_scene(i)

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mikasa_bench.errors import BenchError
 from mikasa_bench.lerobot.policy import (
     ACTION_KEY,
     IMAGE_SIZE,
@@ -50,9 +51,12 @@ from mikasa_bench.lerobot.policy import (
     TOP_KEY,
     WRIST_KEY,
     import_lerobot,
+    load_policy_config,
     task_instruction,
 )
-from mikasa_bench.runners.episode import first_value
+from mikasa_bench.media.render import apply_environment, check_render_device, worker_environment
+from mikasa_bench.protocol import RENDER_DEVICES, BenchmarkConfig
+from mikasa_bench.runners.episode import first_value, make_benchmark_env
 
 import_lerobot()  # before lerobot's first import: offline, torchvision importable
 
@@ -113,8 +117,6 @@ class MikasaEnv(EnvConfig):
     def __post_init__(self) -> None:
         import mikasa_envs
 
-        from mikasa_bench.protocol import RENDER_DEVICES
-
         if not self.task:
             raise ValueError(f"--env.task is required: a MIKASA VLA env id such as {DEFAULT_TASK}")
         try:
@@ -171,14 +173,6 @@ class MikasaLeRobotEnv(gym.Env):
         render_mode: str | None = "rgb_array",
     ) -> None:
         import torch
-
-        from mikasa_bench.media.render import (
-            apply_environment,
-            check_render_device,
-            worker_environment,
-        )
-        from mikasa_bench.protocol import BenchmarkConfig
-        from mikasa_bench.runners.episode import make_benchmark_env
 
         # As mikasa-bench's workers: restrict Vulkan to lavapipe before the first env of
         # the process when rendering on the CPU is asked for (no-op otherwise).
@@ -288,9 +282,6 @@ def main() -> None:
     """
     from lerobot.configs.parser import get_path_arg
     from lerobot.scripts.lerobot_eval import main as lerobot_eval_main
-
-    from mikasa_bench.errors import BenchError
-    from mikasa_bench.lerobot.policy import load_policy_config
 
     path = get_path_arg("policy")
     if path and Path(path).expanduser().is_dir():  # a Hub id is lerobot-eval's to resolve

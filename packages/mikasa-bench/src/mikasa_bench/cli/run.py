@@ -5,16 +5,24 @@ with its table and report."""
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .cli_parser import DEFAULT_SIM_BACKEND, QUICKSTART_POLICIES, QUICKSTART_TASKS
-from .errors import BenchError
-from .protocol import NUM_EPISODES_PER_TASK, OBS_MODE, START_SEED, BenchmarkConfig
+from mikasa_bench.cli.common import eprint, parse_policy_kwargs
+from mikasa_bench.cli.parser import DEFAULT_SIM_BACKEND, QUICKSTART_POLICIES, QUICKSTART_TASKS
+from mikasa_bench.errors import BenchError
+from mikasa_bench.policies.loading import check_policy_supports, resolve_policy
+from mikasa_bench.protocol import NUM_EPISODES_PER_TASK, OBS_MODE, START_SEED, BenchmarkConfig
+from mikasa_bench.results.files import META_DIRNAME, RUN_META_FILENAME
+from mikasa_bench.results.report import text_table, write_report
+from mikasa_bench.results.run_data import load_run
+from mikasa_bench.results.store import RunStore
+from mikasa_bench.runners.executor import make_executor
+from mikasa_bench.runners.lockstep import LockstepExecutor
+from mikasa_bench.runners.runner import execute_runs
+from mikasa_bench.tasks import benchmark_commit, make_run_dir, resolve_tasks
 
 # Options that define a run; with --resume they come from the run directory instead.
 _RUN_DEFINING = (
@@ -36,27 +44,9 @@ _RUN_DEFINING = (
 )
 
 
-def _eprint(*args: Any) -> None:
-    print(*args, file=sys.stderr)
-
-
 # ------------------------------------------------------------------------------------
 # run / quickstart
 # ------------------------------------------------------------------------------------
-
-
-def _parse_kwargs(text: str | None) -> dict[str, Any]:
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise BenchError(
-            f"--policy-kwargs must be a JSON object, e.g. '{{\"seed\": 1}}' ({exc})"
-        ) from None
-    if not isinstance(value, dict):
-        raise BenchError("--policy-kwargs must be a JSON object, e.g. '{\"seed\": 1}'")
-    return value
 
 
 def _config(args: argparse.Namespace) -> BenchmarkConfig:
@@ -76,8 +66,6 @@ def _config(args: argparse.Namespace) -> BenchmarkConfig:
 
 
 def _resume_dirs(path: str) -> list[Path]:
-    from mikasa_bench.results.files import META_DIRNAME, RUN_META_FILENAME
-
     root = Path(path)
     if (root / META_DIRNAME / RUN_META_FILENAME).is_file():
         return [root]
@@ -96,8 +84,6 @@ def _resume_dirs(path: str) -> list[Path]:
 def _executor_from(args: argparse.Namespace) -> Any:
     """The executor the options ask for (raises on a bad combination, before anything is
     written)."""
-    from mikasa_bench.runners.executor import make_executor
-
     return make_executor(
         args.executor, args.workers, address=args.address, envs_per_worker=args.envs_per_worker
     )
@@ -105,8 +91,6 @@ def _executor_from(args: argparse.Namespace) -> Any:
 
 def _lockstep_executor(args: argparse.Namespace, batch: int) -> Any:
     """The executor of a ``--policy-batch`` run (its envs are its own processes)."""
-    from mikasa_bench.runners.lockstep import LockstepExecutor
-
     given = [
         flag
         for flag, value in (
@@ -132,10 +116,6 @@ def _execute_and_report(
     report: bool = True,
     executor: Any = None,
 ) -> int:
-    from mikasa_bench.results.report import text_table, write_report
-    from mikasa_bench.results.run_data import load_run
-    from mikasa_bench.runners.runner import execute_runs
-
     executor = executor if executor is not None else _executor_from(args)
     if any(s.config.policy_batch > 1 for s in stores):
         executor = _lockstep_executor(args, max(s.config.policy_batch for s in stores))
@@ -151,7 +131,7 @@ def _execute_and_report(
     if "address" in desc:
         details.append(f"Ray at {desc['address']}")
     details.append(f"render {stores[0].config.render_description()}")
-    _eprint(
+    eprint(
         f"running {pending} of {total} episodes with the {desc['name']} executor "
         f"({', '.join(details)}) -> {dirs}"
     )
@@ -159,13 +139,13 @@ def _execute_and_report(
     try:
         execute_runs(stores, executor, progress=not args.no_progress)
     except KeyboardInterrupt:
-        _eprint(
+        eprint(
             f"\ninterrupted; finished episodes are saved. Continue with:\n"
             f"  mikasa-bench run --resume {_resume_hint(stores)}"
         )
         return 130
     except BenchError as exc:
-        _eprint(
+        eprint(
             f"error: {exc}\n\nresults finished so far are kept in {dirs}; "
             f"continue with: mikasa-bench run --resume {_resume_hint(stores)}"
         )
@@ -189,12 +169,8 @@ def _resume_hint(stores: Sequence[Any]) -> str:
     return str(parents.pop()) if len(parents) == 1 else str(stores[0].run_dir)
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    from mikasa_bench.policies.loading import check_policy_supports, resolve_policy
-    from mikasa_bench.results.store import RunStore
-
-    from .tasks import benchmark_commit, make_run_dir, resolve_tasks
-
+def cmd_run(args: argparse.Namespace) -> int:
+    """``mikasa-bench run``: evaluate policies on tasks (or ``--resume`` a run directory)."""
     executor = _executor_from(args)
     if args.resume:
         given = [
@@ -219,7 +195,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             "choose a policy: --policy zero | random | oracle | oracle-memoryless | module:Class | "
             "path/file.py[:Class] | ws://HOST:PORT | lerobot:DIR"
         )
-    kwargs = _parse_kwargs(args.policy_kwargs)
+    kwargs = parse_policy_kwargs(args.policy_kwargs)
     if kwargs and len(args.policy) > 1:
         raise BenchError("--policy-kwargs applies to a single --policy; run policies separately")
     config = _config(args)
@@ -255,12 +231,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return _execute_and_report(stores, args, base, not args.no_report, executor)
 
 
-def _cmd_quickstart(args: argparse.Namespace) -> int:
-    from mikasa_bench.policies.loading import resolve_policy
-    from mikasa_bench.results.store import RunStore
-
-    from .tasks import benchmark_commit, resolve_tasks
-
+def cmd_quickstart(args: argparse.Namespace) -> int:
+    """``mikasa-bench quickstart``: the oracle and zero policies on three short tasks."""
     if args.episodes < 1:
         raise BenchError(f"--episodes must be >= 1, got {args.episodes}")
     executor = _executor_from(args)
@@ -281,7 +253,7 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
                     f"{d} holds a different evaluation (settings {store.config.to_dict()}); "
                     f"choose another --out"
                 )
-            _eprint(
+            eprint(
                 f"{d}: continuing the existing quickstart run "
                 f"({store.n_done_episodes} episodes already done)"
             )

@@ -3,24 +3,30 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 from pathlib import Path
 
-from .cli_run import _eprint, _parse_kwargs
-from .errors import BenchError
+from mikasa_oracles import has_oracle
+
+from mikasa_bench.cli.common import eprint, parse_policy_kwargs
+from mikasa_bench.errors import BenchError
+from mikasa_bench.policies.loading import resolve_policy
+from mikasa_bench.policies.remote.server import PolicyServer
+from mikasa_bench.reference import is_reference
+from mikasa_bench.results.compare import compare_runs, format_comparison
+from mikasa_bench.results.report import text_table, write_report
+from mikasa_bench.results.run_data import load_run
+from mikasa_bench.results.text import format_rows
+from mikasa_bench.tasks import registered_env_ids, select_benchmark_tasks
 
 # ------------------------------------------------------------------------------------
 # list
 # ------------------------------------------------------------------------------------
 
 
-def _cmd_list(args: argparse.Namespace) -> int:
-    from mikasa_oracles import has_oracle
-
-    from mikasa_bench.results.text import format_rows
-
-    from .tasks import registered_env_ids, select_benchmark_tasks
-
+def cmd_list(args: argparse.Namespace) -> int:
+    """``mikasa-bench list``: the benchmark tasks, registered or not, with their oracle."""
     tasks = select_benchmark_tasks(split=args.split)
     if args.memory_type:
         known = sorted({t.memory_type for t in tasks})
@@ -60,12 +66,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------------------------
 
 
-def _cmd_report(args: argparse.Namespace) -> int:
-    from mikasa_bench.results.report import text_table, write_report
-    from mikasa_bench.results.run_data import load_run
-
-    from .reference import is_reference
-
+def cmd_report(args: argparse.Namespace) -> int:
+    """``mikasa-bench report``: the text table, then report.md and report.html."""
     if not args.out and any(is_reference(d) for d in args.dirs):
         raise BenchError("reference result sets are read-only: give --out DIR for the report")
     runs = [load_run(d) for d in args.dirs]
@@ -86,10 +88,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_compare(args: argparse.Namespace) -> int:
-    from mikasa_bench.results.compare import compare_runs, format_comparison
-    from mikasa_bench.results.run_data import load_run
-
+def cmd_compare(args: argparse.Namespace) -> int:
+    """``mikasa-bench compare``: per-task deltas of B against A; 1 if B is significantly
+    worse on any task."""
     a, b = load_run(args.dir_a), load_run(args.dir_b)
     if a.label == b.label:
         a.label, b.label = f"A: {a.label}", f"B: {b.label}"
@@ -101,19 +102,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 1 if comp.regressions else 0
 
 
-def _cmd_serve(args: argparse.Namespace) -> int:
-    import logging
-
-    from mikasa_bench.policies.loading import resolve_policy
-    from mikasa_bench.policies.remote.server import PolicyServer
-
-    spec = resolve_policy(args.policy, _parse_kwargs(args.policy_kwargs))
+def cmd_serve(args: argparse.Namespace) -> int:
+    """``mikasa-bench serve``: serve a policy over a websocket until Ctrl-C."""
+    spec = resolve_policy(args.policy, parse_policy_kwargs(args.policy_kwargs))
     server = PolicyServer(spec, host=args.host, port=args.port)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)
 
     def ready(s: PolicyServer) -> None:
-        _eprint(
+        eprint(
             f"serving policy {spec.label or spec.target!r} on {args.host}:{s.port}; "
             f"evaluate it with: mikasa-bench run --policy ws://HOST:{s.port} ... (Ctrl-C stops)"
         )
@@ -121,5 +118,5 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         server.serve_forever(on_ready=ready)
     except KeyboardInterrupt:
-        _eprint("stopped")
+        eprint("stopped")
     return 0

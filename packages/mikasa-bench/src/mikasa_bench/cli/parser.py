@@ -7,9 +7,7 @@ from __future__ import annotations
 import argparse
 
 from mikasa_bench.media.gallery import add_gallery_parser
-from mikasa_bench.results.validity import add_validity_parser
-
-from .protocol import (
+from mikasa_bench.protocol import (
     CONTROL_MODE,
     NUM_EPISODES_PER_TASK,
     OBS_MODE,
@@ -19,6 +17,7 @@ from .protocol import (
     SUPPORTED_OBS_MODES,
     SUPPORTED_SPLITS,
 )
+from mikasa_bench.results.validity import add_validity_parser
 
 QUICKSTART_TASKS: tuple[str, ...] = (
     "RememberColor3-VLA-v0",
