@@ -1,8 +1,13 @@
 """mikasa-bench: evaluate policies on MIKASA-Robo-VLA with the canonical protocol.
 
-Command line: ``mikasa-bench quickstart | list | run | report | compare`` (see the README).
-Library: the protocol constants, task selection, the policy interface, the episode loop,
-the parallel resumable runner and the result/report helpers are re-exported here.
+Command line: ``mikasa-bench quickstart | list | run | report | compare | serve | validity |
+gallery`` (`mikasa_bench.cli`; see the README). Library: the protocol constants, task
+selection, the policy interface, the episode loop, the parallel resumable runner and the
+result helpers are re-exported here (the README's "Python API" table lists them).
+
+Layout: the benchmark's definition at the top (`protocol`, `tasks`, `chance`, `metrics`,
+`errors`), the machinery in subpackages: `policies` (with `policies.remote`), `runners`,
+`results`, `media`, `lerobot`, `cli`, and the shipped result sets in `reference`.
 """
 
 from .errors import (
