@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import sys
 from pathlib import Path
@@ -9,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 from mikasa_robo_rl.agents import AgentStateOnly
-from mikasa_robo_rl.ppo import PPOArgs, observation_mode, parse_args
+from mikasa_robo_rl.ppo import observation_mode, parse_args
 from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -36,6 +37,12 @@ def ppo():
 @pytest.fixture(scope="module")
 def ppo_lstm():
     return _load_script("ppo_memtasks_lstm")
+
+
+def _mode(args) -> str:
+    """The observation mode a trainer's parsed flags ask for."""
+    return observation_mode(include_state=args.include_state, include_rgb=args.include_rgb,
+                            include_joints=args.include_joints, include_oracle=args.include_oracle)
 
 
 def _rollout(env: CpuVectorEnv, steps: int) -> tuple[dict, list[dict]]:
@@ -110,8 +117,8 @@ def test_vector_env_names_unknown_ids():
         (["--include-rgb", "--include-joints", "--include-oracle"], "rgb_joints_oracle"),
     ],
 )
-def test_mode_resolution(flags, mode):
-    assert observation_mode(parse_args(PPOArgs, ["--env_id=X-v0", *flags])) == mode
+def test_mode_resolution(ppo, flags, mode):
+    assert _mode(parse_args(ppo.Args, ["--env_id=X-v0", *flags])) == mode
 
 
 @pytest.mark.parametrize(
@@ -123,9 +130,16 @@ def test_mode_resolution(flags, mode):
         (["--include-state", "--include-oracle"], NotImplementedError),
     ],
 )
-def test_mode_errors(flags, error):
+def test_mode_errors(ppo, flags, error):
     with pytest.raises(error):
-        observation_mode(parse_args(PPOArgs, flags))
+        _mode(parse_args(ppo.Args, flags))
+
+
+def test_the_lstm_trainer_takes_the_mlp_trainers_flags_and_its_own(ppo, ppo_lstm):
+    # Each trainer declares its flags; the shared ones must not drift apart (names and defaults).
+    mlp = {f.name: f.default for f in dataclasses.fields(ppo.Args)}
+    lstm = {f.name: f.default for f in dataclasses.fields(ppo_lstm.Args)}
+    assert lstm == mlp | {"lstm_hidden_size": 512, "lstm_num_layers": 1, "lstm_dropout": 0.0}
 
 
 def test_underscore_and_dash_spellings_agree(ppo):
@@ -204,7 +218,7 @@ def test_run_file_lines_parse(ppo, ppo_lstm, trainer, flags):
     # A mistyped or renamed flag fails here rather than minutes into a time-limited GPU job.
     module = {"ppo_memtasks.py": ppo, "ppo_memtasks_lstm.py": ppo_lstm}[trainer]
     args = parse_args(module.Args, [*flags, "--time-limit", "60"])
-    assert args.env_id and observation_mode(args)
+    assert args.env_id and _mode(args)
 
 
 # Each shipped checkpoint with its task's horizon (one eval episode per env). Their figures

@@ -1,5 +1,7 @@
-"""The PPO agents of the RL release: the state-only MLP (``AgentStateOnly``) and the
-image agent (``NatureCNN`` features + MLP heads, ``Agent``) of ``ppo_baselines.md`` §4.
+"""The network pieces of the RL release's PPO agents (``ppo_baselines.md`` §4): the state-only
+MLP (``AgentStateOnly``), the image encoder (``NatureCNN``) and what every agent shares
+(``GaussianActorCritic``). The trainers' image agents (``Agent`` in
+``baselines/ppo/ppo_memtasks.py``, ``AgentLSTM`` in ``ppo_memtasks_lstm.py``) are built from them.
 
 ``AgentStateOnly`` is the network of the release's ``ppo_memtasks`` state baseline, whose
 ``final_success_ckpt.pt`` checkpoints the RL data collector replays
@@ -27,9 +29,8 @@ __all__ = [
     "CKPT_NAME",
     "CKPT_SUBDIR",
     "INITIAL_LOGSTD",
-    "Agent",
-    "AgentLSTM",
     "AgentStateOnly",
+    "GaussianActorCritic",
     "NatureCNN",
     "find_checkpoints",
     "flatten_state_obs",
@@ -66,10 +67,10 @@ def _mlp(in_dim: int, out_dim: int, out_std: float) -> nn.Sequential:
     )
 
 
-class _GaussianHeads(nn.Module):
-    """What the three agents share: a diagonal Gaussian policy with the state-independent
-    ``actor_logstd`` over ``actor_mean(features)``, and ``critic(features)``; log-prob and
-    entropy summed over action dimensions (``ppo_baselines.md`` §4)."""
+class GaussianActorCritic(nn.Module):
+    """What the PPO agents share: a diagonal Gaussian policy with the state-independent
+    ``actor_logstd`` over ``actor_mean(features)``, and ``critic(features)`` (``ppo_baselines.md``
+    §4); the adjustments a resumed run makes to them and the gradient norms the update logs."""
 
     actor_mean: nn.Module
     critic: nn.Module
@@ -101,23 +102,8 @@ class _GaussianHeads(nn.Module):
         actor = [*self.actor_mean.parameters(), self.actor_logstd]
         return {"actor_grad_norm": norm(actor), "critic_grad_norm": norm(self.critic.parameters())}
 
-    def _distribution(self, mean: torch.Tensor) -> Normal:
-        return Normal(mean, torch.exp(self.actor_logstd.expand_as(mean)))
 
-    def _act(self, features: torch.Tensor, deterministic: bool) -> torch.Tensor:
-        mean = self.actor_mean(features)
-        return mean if deterministic else self._distribution(mean).sample()
-
-    def _act_and_score(
-        self, features: torch.Tensor, action: torch.Tensor | None
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        probs = self._distribution(self.actor_mean(features))
-        if action is None:
-            action = probs.sample()
-        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(features)
-
-
-class AgentStateOnly(_GaussianHeads):
+class AgentStateOnly(GaussianActorCritic):
     """PPO actor-critic MLP on the flattened state observation.
 
     Critic and actor mean are ``Linear(obs_dim, 256)-Tanh-Linear(256, 256)-Tanh-
@@ -138,13 +124,20 @@ class AgentStateOnly(_GaussianHeads):
 
     def get_action(self, x: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
         """The action for ``x``: the mean if ``deterministic``, else a Gaussian sample."""
-        return self._act(x, deterministic)
+        action_mean = self.actor_mean(x)
+        if deterministic:
+            return action_mean
+        return Normal(action_mean, torch.exp(self.actor_logstd.expand_as(action_mean))).sample()
 
     def get_action_and_value(
         self, x: torch.Tensor, action: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
-        return self._act_and_score(x, action)
+        action_mean = self.actor_mean(x)
+        probs = Normal(action_mean, torch.exp(self.actor_logstd.expand_as(action_mean)))
+        if action is None:
+            action = probs.sample()
+        return action, probs.log_prob(action).sum(1), probs.entropy().sum(1), self.critic(x)
 
     @classmethod
     def from_state_dict(cls, state_dict: Mapping[str, Any]) -> AgentStateOnly:
@@ -204,109 +197,6 @@ class NatureCNN(nn.Module):
             x = self._image(obs[key]) if key == "rgb" else obs[key].float().reshape(obs[key].shape[0], -1)
             parts.append(extractor(x))
         return torch.cat(parts, dim=1)
-
-
-class Agent(_GaussianHeads):
-    """PPO actor-critic for image observations: ``NatureCNN`` features, then critic
-    ``Linear(F, 512)-ReLU-Linear(512, 1)`` and actor mean ``Linear(F, 512)-ReLU-
-    Linear(512, action_dim)``; diagonal Gaussian with ``actor_logstd`` as ``AgentStateOnly``."""
-
-    def __init__(
-        self, sample_obs: Mapping[str, torch.Tensor], action_dim: int, initial_logstd: float = INITIAL_LOGSTD
-    ) -> None:
-        super().__init__()
-        self.feature_net = NatureCNN(sample_obs)
-        width = self.feature_net.out_features
-        self.critic = nn.Sequential(layer_init(nn.Linear(width, 512)), nn.ReLU(), layer_init(nn.Linear(512, 1)))
-        self.actor_mean = nn.Sequential(
-            layer_init(nn.Linear(width, 512)), nn.ReLU(), layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2))
-        )
-        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * initial_logstd)
-
-    def get_value(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """V(obs), shape ``(B, 1)``."""
-        return self.critic(self.feature_net(obs))
-
-    def get_action(self, obs: Mapping[str, torch.Tensor], deterministic: bool = False) -> torch.Tensor:
-        """The mean action if ``deterministic``, else a Gaussian sample."""
-        return self._act(self.feature_net(obs), deterministic)
-
-    def get_action_and_value(
-        self, obs: Mapping[str, torch.Tensor], action: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(action, log_prob, entropy, value)`` as PPO's update needs them."""
-        return self._act_and_score(self.feature_net(obs), action)
-
-
-LSTMState = tuple[torch.Tensor, torch.Tensor]
-
-
-class AgentLSTM(_GaussianHeads):
-    """PPO-LSTM actor-critic (``ppo_baselines.md`` §4.3): ``NatureCNN`` features (proprio
-    width 256), an LSTM (orthogonal weights, zero biases), then critic and actor-mean heads
-    ``Linear(H, 512)-ReLU-Linear(512, out)`` on its output; ``actor_logstd`` as the others.
-
-    Inputs are batches of ``T * B`` observations, time-major (``B`` = the recurrent state's
-    batch); ``done`` marks observations that start a new episode: the state is zeroed there.
-    """
-
-    def __init__(
-        self, sample_obs: Mapping[str, torch.Tensor], action_dim: int, hidden_size: int = 512,
-        num_layers: int = 1, dropout: float = 0.0, initial_logstd: float = INITIAL_LOGSTD,
-    ) -> None:
-        super().__init__()
-        self.feature_net = NatureCNN(sample_obs, proprio_width=256)
-        self.lstm = nn.LSTM(self.feature_net.out_features, hidden_size, num_layers=num_layers, dropout=dropout)
-        for name, param in self.lstm.named_parameters():
-            if "bias" in name:
-                nn.init.constant_(param, 0)
-            elif "weight" in name:
-                nn.init.orthogonal_(param, 1.0)
-        self.critic = nn.Sequential(layer_init(nn.Linear(hidden_size, 512)), nn.ReLU(), layer_init(nn.Linear(512, 1)))
-        self.actor_mean = nn.Sequential(
-            layer_init(nn.Linear(hidden_size, 512)), nn.ReLU(),
-            layer_init(nn.Linear(512, action_dim), std=0.01 * math.sqrt(2)),
-        )
-        self.actor_logstd = nn.Parameter(torch.ones(1, action_dim) * initial_logstd)
-
-    def initial_state(self, batch: int, device: torch.device | str = "cpu") -> LSTMState:
-        """Zero ``(h, c)`` for ``batch`` envs."""
-        shape = (self.lstm.num_layers, batch, self.lstm.hidden_size)
-        return torch.zeros(shape, device=device), torch.zeros(shape, device=device)
-
-    def get_states(
-        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor
-    ) -> tuple[torch.Tensor, LSTMState]:
-        """LSTM outputs ``(T * B, H)`` for time-major ``obs`` and the final state."""
-        features = self.feature_net(obs)
-        batch = state[0].shape[1]
-        features = features.reshape((-1, batch, self.lstm.input_size))
-        done = done.reshape((-1, batch))
-        outputs = []
-        for x, d in zip(features, done, strict=True):
-            keep = (1.0 - d).view(1, -1, 1)
-            out, state = self.lstm(x.unsqueeze(0), (keep * state[0], keep * state[1]))
-            outputs.append(out)
-        return torch.flatten(torch.cat(outputs), 0, 1), state
-
-    def get_value(self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor) -> torch.Tensor:
-        """V, shape ``(T * B, 1)``."""
-        hidden, _ = self.get_states(obs, state, done)
-        return self.critic(hidden)
-
-    def get_action(
-        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor, deterministic: bool = False
-    ) -> tuple[torch.Tensor, LSTMState]:
-        """(action, new state): the mean if ``deterministic``, else a Gaussian sample."""
-        hidden, state = self.get_states(obs, state, done)
-        return self._act(hidden, deterministic), state
-
-    def get_action_and_value(
-        self, obs: Mapping[str, torch.Tensor], state: LSTMState, done: torch.Tensor, action: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, LSTMState]:
-        """``(action, log_prob, entropy, value, new state)`` as PPO's update needs them."""
-        hidden, state = self.get_states(obs, state, done)
-        return *self._act_and_score(hidden, action), state
 
 
 def flatten_state_obs(obs: Mapping[str, Any]) -> torch.Tensor:
