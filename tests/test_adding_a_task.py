@@ -80,8 +80,8 @@ def test_the_example_family_goes_through_every_door(plugin_env, tmp_path):
     # The benchmark, in state mode with the oracle: every episode succeeds.
     _run([str(BIN / "mikasa-bench"), "run", "--task", TASK, "--policy", "oracle", "--num-episodes", "2",
           "--obs-mode", "state", "--workers", "1", "--out", "run", "--no-progress"], plugin_env, tmp_path)
-    results = json.loads((tmp_path / "run" / "tasks" / f"{TASK}.json").read_text())
-    assert results["success_rate"] == 1.0 and results["n_episodes"] == 2
+    results = json.loads((tmp_path / "run" / f"{TASK}.json").read_text())
+    assert results["sr"] == 1.0 and results["n_episodes"] == 2 and results["split"] == "Short"
 
     # Demonstrations: two NPZ episodes.
     _run([str(BIN / "mikasa-collect"), "--env-id", TASK, "--num-episodes", "2", "--out", "data",
