@@ -1,22 +1,22 @@
 #!/usr/bin/env bash
 # Train several PPO runs side by side on one machine, each in its own directory, each
-# resumed from its latest resume.pt when there is one (so a machine lent for a limited time
+# resumed from its latest resume.pt when there is one (so a machine available for a limited time
 # can chain calls of this script), each stopped by --time-limit LIMIT_S, counted from the trainer's start
-# (its env workers' start included): a call on a lent machine lasts about LIMIT_S plus the install of
+# (its env workers' start included): a call on a GPU machine lasts about LIMIT_S plus the install of
 # .gpu/run.sh (~55 s), the last iteration and the packing.
 #
 #   bash docs/lab-notes/rl-ppo-runs/run_scripts/side_by_side.sh LIMIT_S RUNS_FILE [WORK_DIR] [ARCHIVE_DIR]
 #
 # RUNS_FILE: one run per line, "<name> <trainer> <flags...>" with <trainer> ppo_memtasks.py or
 # ppo_memtasks_lstm.py ('#' starts a comment);
-# <name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/. On a lent
+# <name>/ under WORK_DIR (default /tmp/ppo_runs) holds its log.txt and checkpoints/. On a GPU
 # machine, make WORK_DIR a git-ignored folder of the tree (e.g. runs/gpu_<name>) and carry each
 # run's latest resume.pt at its path there: a call may land on a fresh machine even right after
 # a warm one, and then only what it carries is there to resume from.
 # With ARCHIVE_DIR, each run's directory is packed into ARCHIVE_DIR/<name>.tgz at the end (its log
 # as log_call.txt, this call's lines alone: merge_call.sh appends them to the log here),
 # with only the KEEP_CKPTS (default 3) latest periodic ckpt_*.pt (a state checkpoint is
-# ~1.2 MB, an rgb one ~10 MB, and a lent machine returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
+# ~1.2 MB, an rgb one ~10 MB, and a GPU machine's call returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
 # is the interpreter that has mikasa-robo-rl[train]. NUM_WORKERS, when set, overrides each run's
 # --num-workers (the last occurrence of a flag wins), so one run file serves the 16-core GPU machine
 # and, between its calls, this 2-core machine: NUM_WORKERS=2 bash side_by_side.sh ...
