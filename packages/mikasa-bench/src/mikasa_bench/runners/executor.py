@@ -235,7 +235,8 @@ class LocalExecutor(Executor):
 
 
 def _ray_executor(workers: int | None = None, address: str | None = None) -> Executor:
-    # Imported lazily: ray is an optional extra (mikasa-bench[ray]).
+    # Imported on demand: the optional extra's executor (mikasa-bench[ray]); its module
+    # loads mikasa_envs (ManiSkill) through mikasa_envs.ray_actors, which a local run skips.
     from mikasa_bench.runners.ray_executor import RayExecutor
 
     return RayExecutor(workers=workers, address=address)
