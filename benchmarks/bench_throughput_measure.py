@@ -101,11 +101,11 @@ def run_parallel(spec: dict[str, Any], args: argparse.Namespace) -> dict[str, An
     recorded on the way through."""
     from mikasa_bench.policies import resolve_policy
     from mikasa_bench.protocol import BenchmarkConfig
+    from mikasa_bench.protocol.tasks import resolve_tasks
     from mikasa_bench.results.store import RunStore
     from mikasa_bench.runners.executor import make_executor
     from mikasa_bench.runners.jobs import EpisodeOutcome, Executor
     from mikasa_bench.runners.runner import execute_runs
-    from mikasa_bench.tasks import resolve_tasks
 
     class Recording(Executor):
         """Passes jobs through and keeps each outcome with its arrival time."""
@@ -264,7 +264,7 @@ def rates(episodes: list[dict[str, Any]], wall_s: float, setup_s: float) -> dict
 def full_run_steps() -> tuple[int, int]:
     """(tasks, env steps) of the full canonical run: every manifest task, 50 episodes, at
     the manifest's full horizons (episodes of a failing policy run to the horizon)."""
-    from mikasa_bench.tasks import select_benchmark_tasks
+    from mikasa_bench.protocol.tasks import select_benchmark_tasks
 
     tasks = select_benchmark_tasks(split="all")
     return len(tasks), FULL_RUN_EPISODES * sum(t.max_episode_steps for t in tasks)

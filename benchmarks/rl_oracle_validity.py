@@ -7,7 +7,7 @@ the remembered answer wiped every step, guesses seeded by the episode seed), see
 random actions and zero actions. A task is valid when the oracle reaches ``success_once`` on
 >= 95 % of the seeds, zero actions on none, and neither the memoryless oracle nor random
 actions do significantly better than chance (the lower end of their Wilson 95 % interval
-above it). Chance is the VLA twin's (``mikasa_bench.chance``: the RL tasks are the same
+above it). Chance is the VLA twin's (``mikasa_bench.results.chance``: the RL tasks are the same
 families with other timing, so the candidates are the same). State observations, CPU
 PhysX, one env per worker process; jobs are (env id, policy, block of seeds).
 
@@ -126,8 +126,8 @@ def main() -> None:
     wall = time.perf_counter() - start
 
     import numpy as np
-    from mikasa_bench.chance import task_chance
-    from mikasa_bench.metrics import wilson_interval
+    from mikasa_bench.results.chance import task_chance
+    from mikasa_bench.results.metrics import wilson_interval
     from mikasa_robo_rl import get_rl_task
 
     rows = []

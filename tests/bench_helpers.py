@@ -11,6 +11,7 @@ import numpy as np
 import torch
 from mikasa_bench.policies import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig
+from mikasa_bench.protocol.tasks import BenchmarkTask
 from mikasa_bench.results.store import RunStore
 from mikasa_bench.results.summary import (
     build_summary,
@@ -18,7 +19,6 @@ from mikasa_bench.results.summary import (
     write_benchmark_results,
 )
 from mikasa_bench.runners.episode import EpisodeResult
-from mikasa_bench.tasks import BenchmarkTask
 
 SPEC_TASK_KEYS = [
     "env_id",

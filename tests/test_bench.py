@@ -22,18 +22,9 @@ from bench_helpers import (
     _task,
 )
 from mikasa_bench.errors import BenchError, PolicyOutputError, UnknownTaskError
-from mikasa_bench.metrics import (
-    newcombe_difference_interval,
-    summarize_task_results,
-    wilson_interval,
-)
 from mikasa_bench.policies import PolicySpec, RandomPolicy, ZeroPolicy, resolve_policy
 from mikasa_bench.protocol import BenchmarkConfig
-from mikasa_bench.results.summary import build_summary
-from mikasa_bench.runners.episode import EpisodeResult, normalize_action_chunk, run_episode
-from mikasa_bench.runners.jobs import EpisodeJob
-from mikasa_bench.runners.runner import evaluate_benchmark
-from mikasa_bench.tasks import (
+from mikasa_bench.protocol.tasks import (
     MANIFEST_HEADER,
     BenchmarkTask,
     load_benchmark_tasks,
@@ -41,6 +32,15 @@ from mikasa_bench.tasks import (
     resolve_tasks,
     select_benchmark_tasks,
 )
+from mikasa_bench.results.metrics import (
+    newcombe_difference_interval,
+    summarize_task_results,
+    wilson_interval,
+)
+from mikasa_bench.results.summary import build_summary
+from mikasa_bench.runners.episode import EpisodeResult, normalize_action_chunk, run_episode
+from mikasa_bench.runners.jobs import EpisodeJob
+from mikasa_bench.runners.runner import evaluate_benchmark
 
 # --------------------------------------------------------------------------------------
 # protocol, manifest, selection

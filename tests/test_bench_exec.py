@@ -19,6 +19,7 @@ from mikasa_bench.media.render import LAVAPIPE_ICD_ENV, gym_render_kwargs, worke
 from mikasa_bench.media.video import EpisodeVideo, compose_frame
 from mikasa_bench.policies import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig, protocol_settings
+from mikasa_bench.protocol.tasks import BenchmarkTask
 from mikasa_bench.results.report import write_report
 from mikasa_bench.results.run_data import load_run
 from mikasa_bench.results.store import RunStore
@@ -26,7 +27,6 @@ from mikasa_bench.runners.executor import InlineExecutor, LocalExecutor, make_ex
 from mikasa_bench.runners.jobs import EpisodeJob, render_config
 from mikasa_bench.runners.runner import execute_runs
 from mikasa_bench.runners.worker import worker_env_vars
-from mikasa_bench.tasks import BenchmarkTask
 
 TASK = BenchmarkTask("RememberColor3-VLA-v0", "short", "Object", 25, "", "PPO")
 

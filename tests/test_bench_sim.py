@@ -19,8 +19,8 @@ import torch
 from mikasa_bench import cli
 from mikasa_bench.policies import resolve_policy
 from mikasa_bench.protocol import BenchmarkConfig
+from mikasa_bench.protocol.tasks import resolve_tasks
 from mikasa_bench.results.store import RunStore
-from mikasa_bench.tasks import resolve_tasks
 
 TASK = "RememberColor3-VLA-v0"
 COMMON = [

@@ -245,7 +245,7 @@ def test_requests_carry_the_documented_keys(tmp_path):
     with raw_server(lambda req: zeros) as (uri, requests):
         assert _run(tmp_path / "run", uri) == 0
     assert len(requests) == 50  # 2 episodes x 25 steps, one action per request
-    from mikasa_bench.tasks import load_benchmark_tasks
+    from mikasa_bench.protocol.tasks import load_benchmark_tasks
 
     prompt = next(t for t in load_benchmark_tasks() if t.env_id == TASK).language_instruction
     for i, req in enumerate(requests):

@@ -1,4 +1,4 @@
-"""Chance rates (`mikasa_bench.chance`) and the validity table generator (`mikasa_bench.results.validity`)."""
+"""Chance rates (`mikasa_bench.results.chance`) and the validity table generator (`mikasa_bench.results.validity`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import mikasa_envs
 import numpy as np
 import pytest
 from mani_skill.utils.registration import REGISTERED_ENVS
-from mikasa_bench.chance import task_chance
 from mikasa_bench.results import validity
+from mikasa_bench.results.chance import task_chance
 from mikasa_bench.results.leaks import LEAK_STATUSES, LEAKS
 from mikasa_envs.tasks._batteries_checker import coupon_chance
 from mikasa_envs.tasks._trace_shape_chance import trace_shape_guess_rate

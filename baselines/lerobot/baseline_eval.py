@@ -16,7 +16,7 @@ from typing import Any
 from baseline_common import TimeUp, UnitFailed, calls_wall_s, display, log, read_json, rel
 from baseline_settings import Setting
 from mikasa_bench.errors import BenchError
-from mikasa_bench.metrics import wilson_interval
+from mikasa_bench.results.metrics import wilson_interval
 from mikasa_bench.results.run_data import load_run
 
 __all__ = ["BENCH_INTERRUPTED", "EvaluateStage"]

@@ -2,7 +2,7 @@
 records, table and log tails that travels back from a GPU machine without network.
 
 `build_table` gathers everything the table shows into a JSON-ready dict (chance from
-``mikasa_bench.chance``, the memory type from the task manifest); `render_markdown` writes
+``mikasa_bench.results.chance``, the memory type from the task manifest); `render_markdown` writes
 it as Markdown. The JSON holds every record, so `restore_records` can bring a fresh clone's
 (or a fresh machine's) records back from the committed table.
 """
@@ -20,7 +20,7 @@ from typing import Any
 from baseline_common import DRIVER_CALL, log, now, read_json, rel, write_json
 from baseline_settings import DEFAULT_REFERENCES, DEFAULT_TASKS
 from baseline_stages import Driver
-from mikasa_bench.chance import task_chance
+from mikasa_bench.results.chance import task_chance
 
 __all__ = ["build_table", "render_markdown", "pack", "restore_records"]
 
@@ -161,7 +161,7 @@ def _results(t: Mapping[str, Any], cols: list[tuple[str, str]]) -> list[str]:
         f"Success rate over {t['eval_episodes']} canonical episodes per task (`mikasa-bench run`, "
         "seeds 4242424242 + i, rgb, `pd_ee_delta_pose`, canonical wrapper chain) as successes/episodes "
         "= rate [Wilson 95 % interval]. **chance**: what a policy without memory gets by guessing "
-        "(`mikasa_bench.chance`; reasons below). Learned policies: LeRobot 0.4.4 policies trained "
+        "(`mikasa_bench.results.chance`; reasons below). Learned policies: LeRobot 0.4.4 policies trained "
         f"from scratch (no pretrained weights) on {t['episodes_per_task']} oracle demonstrations per "
         f"task, {t['steps']} steps at batch {t['batch_size']} unless a row says otherwise. "
         "*at chance* / *above* / *below*: where chance lies relative to the interval.\n",

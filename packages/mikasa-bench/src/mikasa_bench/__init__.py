@@ -17,7 +17,6 @@ from .errors import (
     PolicyOutputError,
     UnknownTaskError,
 )
-from .metrics import newcombe_difference_interval, summarize_task_results, wilson_interval
 from .policies.base import ChunkPolicy
 from .policies.builtin import BUILTIN_POLICIES, DummyChunkPolicy, RandomPolicy, ZeroPolicy
 from .policies.loading import build_policy, resolve_policy
@@ -32,14 +31,7 @@ from .protocol import (
     WRAPPER_CHAIN,
     BenchmarkConfig,
 )
-from .results.run_data import RunData, load_run
-from .results.store import RunStore
-from .results.summary import build_summary, build_task_result, write_benchmark_results
-from .runners.episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
-from .runners.executor import InlineExecutor, LocalExecutor, make_executor
-from .runners.jobs import EpisodeJob, EpisodeOutcome, Executor
-from .runners.runner import evaluate_benchmark, evaluate_task, execute_runs
-from .tasks import (
+from .protocol.tasks import (
     BenchmarkTask,
     benchmark_commit,
     load_benchmark_tasks,
@@ -48,6 +40,14 @@ from .tasks import (
     resolve_tasks,
     select_benchmark_tasks,
 )
+from .results.metrics import newcombe_difference_interval, summarize_task_results, wilson_interval
+from .results.run_data import RunData, load_run
+from .results.store import RunStore
+from .results.summary import build_summary, build_task_result, write_benchmark_results
+from .runners.episode import EpisodeResult, make_benchmark_env, normalize_action_chunk, run_episode
+from .runners.executor import InlineExecutor, LocalExecutor, make_executor
+from .runners.jobs import EpisodeJob, EpisodeOutcome, Executor
+from .runners.runner import evaluate_benchmark, evaluate_task, execute_runs
 
 __version__ = "0.1.0"
 

@@ -13,12 +13,12 @@ from mikasa_bench.cli.common import eprint, parse_policy_kwargs
 from mikasa_bench.errors import BenchError
 from mikasa_bench.policies.loading import resolve_policy
 from mikasa_bench.policies.remote.server import PolicyServer
+from mikasa_bench.protocol.tasks import registered_env_ids, select_benchmark_tasks
 from mikasa_bench.reference import is_reference
 from mikasa_bench.results.compare import compare_runs, format_comparison
 from mikasa_bench.results.report import text_table, write_report
 from mikasa_bench.results.run_data import load_run
 from mikasa_bench.results.text import format_rows
-from mikasa_bench.tasks import registered_env_ids, select_benchmark_tasks
 
 # ------------------------------------------------------------------------------------
 # list

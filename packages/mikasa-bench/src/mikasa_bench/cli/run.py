@@ -15,6 +15,7 @@ from mikasa_bench.cli.parser import DEFAULT_SIM_BACKEND, QUICKSTART_POLICIES, QU
 from mikasa_bench.errors import BenchError
 from mikasa_bench.policies.loading import check_policy_supports, resolve_policy
 from mikasa_bench.protocol import NUM_EPISODES_PER_TASK, OBS_MODE, START_SEED, BenchmarkConfig
+from mikasa_bench.protocol.tasks import benchmark_commit, make_run_dir, resolve_tasks
 from mikasa_bench.results.files import META_DIRNAME, RUN_META_FILENAME
 from mikasa_bench.results.report import text_table, write_report
 from mikasa_bench.results.run_data import load_run
@@ -22,7 +23,6 @@ from mikasa_bench.results.store import RunStore
 from mikasa_bench.runners.executor import make_executor
 from mikasa_bench.runners.lockstep import LockstepExecutor
 from mikasa_bench.runners.runner import execute_runs
-from mikasa_bench.tasks import benchmark_commit, make_run_dir, resolve_tasks
 
 # Options that define a run; with --resume they come from the run directory instead.
 _RUN_DEFINING = (

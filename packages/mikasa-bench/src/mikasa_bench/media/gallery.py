@@ -8,7 +8,7 @@ side by side, with the phase (cue / delay / action), the step and the success la
 written under them, become ``OUT/tasks/<env_id>.webp`` (animated); ``OUT/tasks/<env_id>.json`` holds
 the task's card: id, instruction, memory type, split, horizon, what is hidden and when
 (the env class's Task Description and its phase lengths), the success condition, chance
-level (`mikasa_bench.chance`) and the episode's outcome. ``OUT/index.html`` shows them all
+level (`mikasa_bench.results.chance`) and the episode's outcome. ``OUT/index.html`` shows them all
 and ``OUT/gallery.json`` lists the cards.
 
 A task whose card exists is not rendered again, so an interrupted gallery resumes; every
@@ -32,16 +32,16 @@ from typing import Any
 
 import numpy as np
 
-from mikasa_bench.chance import task_chance
 from mikasa_bench.errors import BenchError
 from mikasa_bench.media.gallery_html import write_index
 from mikasa_bench.media.render import apply_environment
 from mikasa_bench.policies.loading import build_policy, resolve_policy
 from mikasa_bench.protocol import START_SEED, SUPPORTED_SPLITS, BenchmarkConfig
+from mikasa_bench.protocol.tasks import registered_env_ids, resolve_tasks
+from mikasa_bench.results.chance import task_chance
 from mikasa_bench.results.files import atomic_write_bytes, atomic_write_json
 from mikasa_bench.runners.episode import make_benchmark_env, run_episode
 from mikasa_bench.runners.worker import worker_env_vars
-from mikasa_bench.tasks import registered_env_ids, resolve_tasks
 
 __all__ = [
     "PHASE_COLORS",

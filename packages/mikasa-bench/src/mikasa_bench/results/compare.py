@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from statistics import NormalDist
 from typing import Any
 
-from mikasa_bench.metrics import newcombe_difference_interval
+from mikasa_bench.results.metrics import newcombe_difference_interval
 from mikasa_bench.results.run_data import RunData
 from mikasa_bench.results.text import format_percent, format_rows
 

@@ -95,7 +95,7 @@ LEAKS: tuple[Leak, ...] = (
         "Monte Carlo of such guesses passes 90 % of Easy episodes. After the fix (50 canonical "
         "seeds): the memoryless oracle (centre guessed from its range too) 5/50, 1/50, 1/50 "
         "on Easy, Medium, Hard against chance (a contour guessed from the prior, "
-        "mikasa_bench.chance) 6.5 / 3.6 / 2.3 %",
+        "mikasa_bench.results.chance) 6.5 / 3.6 / 2.3 %",
         status="closed",
         fix="the lamp stands at a fixed spot, (0.2, 0), for every episode; draws and scoring "
         "are unchanged, and the seed-0 reset frames still match the reference's (top camera "
@@ -133,7 +133,7 @@ LEAKS: tuple[Leak, ...] = (
         "centre the lamp showed), 50 canonical seeds, state obs: Easy 35/50, Medium 15/50, "
         "Hard 14/50 (the oracle 50/50). After the fix: 3/50, 0/50, 0/50 (the oracle 50/50) "
         "against chance 1.9 / 0.7 / 0.6 % (contours guessed from the prior with the shown "
-        "shapes, mikasa_bench.chance); Easy's interval starts at 2.1 %, at the edge: the "
+        "shapes, mikasa_bench.results.chance); Easy's interval starts at 2.1 %, at the edge: the "
         "memoryless oracle goes on tracing its later guesses about the same centre while an "
         "earlier contour is still the active one, chances the guess-rate model does not count",
         status="closed",

@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.metrics import aggregate_by, wilson_interval
 from mikasa_bench.results.files import atomic_write_bytes
+from mikasa_bench.results.metrics import aggregate_by, wilson_interval
 from mikasa_bench.results.run_data import RunData
 from mikasa_bench.results.text import format_percent, format_rows
 

@@ -23,6 +23,7 @@ from mikasa_bench.errors import BenchError
 from mikasa_bench.media.video import video_relpath
 from mikasa_bench.policies.spec import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings
+from mikasa_bench.protocol.tasks import BenchmarkTask
 from mikasa_bench.results.files import (
     JOURNAL_FILENAME,
     META_DIRNAME,
@@ -34,7 +35,6 @@ from mikasa_bench.results.files import (
 )
 from mikasa_bench.results.summary import build_summary, build_task_result
 from mikasa_bench.runners.episode import EpisodeResult
-from mikasa_bench.tasks import BenchmarkTask
 
 __all__ = ["RunStore", "RUN_FORMAT"]
 

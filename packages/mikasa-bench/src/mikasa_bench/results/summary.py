@@ -7,11 +7,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.metrics import aggregate_by, summarize_task_results, wilson_interval
 from mikasa_bench.protocol import NUM_ENVS, BenchmarkConfig, protocol_settings
+from mikasa_bench.protocol.tasks import BenchmarkTask
 from mikasa_bench.results.files import SUMMARY_FILENAME, atomic_write_json
+from mikasa_bench.results.metrics import aggregate_by, summarize_task_results, wilson_interval
 from mikasa_bench.runners.episode import EpisodeResult
-from mikasa_bench.tasks import BenchmarkTask
 
 __all__ = ["build_task_result", "build_summary", "write_benchmark_results"]
 

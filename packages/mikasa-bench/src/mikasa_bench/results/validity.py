@@ -3,7 +3,7 @@
 From result directories of the four reference policies (``oracle``, ``oracle-memoryless``,
 ``random``, ``zero``; any mix of run directories and directories of runs), per task: the
 success rate of each with its Wilson 95 % interval, the chance rate
-(`mikasa_bench.chance`) and flags where something is off:
+(`mikasa_bench.results.chance`) and flags where something is off:
 
 * ``oracle<95%``: the oracle's success rate is below 95 %;
 * ``zero>0``: the zero policy succeeded at least once;
@@ -32,12 +32,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mikasa_bench.chance import task_chance
 from mikasa_bench.errors import BenchError
-from mikasa_bench.metrics import wilson_interval
 from mikasa_bench.reference import is_reference, resolve_reference
+from mikasa_bench.results.chance import task_chance
 from mikasa_bench.results.files import SUMMARY_FILENAME, atomic_write_json
 from mikasa_bench.results.leaks import LEAK_STATUSES, LEAKS, Leak
+from mikasa_bench.results.metrics import wilson_interval
 from mikasa_bench.results.run_data import load_run
 
 __all__ = [
@@ -282,7 +282,7 @@ def validity_markdown(
         "Flags: `oracle<95%`, `zero>0`, and `memoryless>chance` / `random>chance` where the "
         "lower end of the interval lies above chance (significantly better than guessing: the "
         "task leaks its answer). Chance per task is explained below the table "
-        "(`mikasa_bench.chance`).",
+        "(`mikasa_bench.results.chance`).",
         "",
     ]
     if sources:

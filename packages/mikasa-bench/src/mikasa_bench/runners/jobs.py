@@ -15,8 +15,8 @@ from typing import Any
 from mikasa_bench.errors import BenchError
 from mikasa_bench.policies.spec import PolicySpec
 from mikasa_bench.protocol import BenchmarkConfig, scene_start
+from mikasa_bench.protocol.tasks import BenchmarkTask
 from mikasa_bench.runners.episode import EpisodeResult
-from mikasa_bench.tasks import BenchmarkTask
 
 __all__ = ["EpisodeJob", "EpisodeOutcome", "Executor", "render_config"]
 

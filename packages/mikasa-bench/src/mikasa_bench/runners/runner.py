@@ -21,6 +21,7 @@ from mikasa_bench.errors import EpisodeFailedError
 from mikasa_bench.media.video import EpisodeVideo
 from mikasa_bench.policies.base import policy_chunk_size
 from mikasa_bench.protocol import BenchmarkConfig, package_versions, protocol_settings, starts_scene
+from mikasa_bench.protocol.tasks import BenchmarkTask, benchmark_commit
 from mikasa_bench.results.files import atomic_write_bytes
 from mikasa_bench.results.store import RunStore
 from mikasa_bench.results.summary import (
@@ -30,7 +31,6 @@ from mikasa_bench.results.summary import (
 )
 from mikasa_bench.runners.episode import EpisodeResult, make_benchmark_env, run_episode
 from mikasa_bench.runners.jobs import EpisodeJob, Executor
-from mikasa_bench.tasks import BenchmarkTask, benchmark_commit
 
 __all__ = ["execute_runs", "evaluate_task", "evaluate_benchmark"]
 

@@ -289,7 +289,7 @@ class MemorylessBatteriesCheckerOracle(Memoryless, BatteriesCheckerOracle):
     Each check cycle (pick, insert, Hard: return, press) takes a battery drawn uniformly
     from the active ones, a fresh draw per cycle from the episode's stream (the view before
     every cycle is the same, so a stable guess would check one battery forever); the
-    episode succeeds once every battery has come up. Chance (`mikasa_bench.chance`): the
+    episode succeeds once every battery has come up. Chance (`mikasa_bench.results.chance`): the
     probability that the cycles fitting in the horizon draw every battery. Kept: the
     motor program within a cycle and the env's stage machine (its feedback on the last
     insert, return or press), neither of which says which batteries are done.

@@ -138,7 +138,7 @@ class MemorylessTakeItBackOracle(Memoryless, TakeItBackOracle):
     to a guessed start: the centre of one of the three start rows of the task's fixed
     layout (x ∈ [−0.05, 0.05), y = 0.1·j + [0, 0.05), j ∈ {−1, 0, 1}), the same row at
     every step. A row centre lies within the 0.08 success radius of every start in its row,
-    so chance is about 1/3 (`mikasa_bench.chance` gives the exact figure). Kept: whether
+    so chance is about 1/3 (`mikasa_bench.results.chance` gives the exact figure). Kept: whether
     the paddle is in contact (motion); the stage follows the target's colour (in view).
     """
 

@@ -91,7 +91,7 @@ class MemorylessTimedTransferOracle(Memoryless, TimedTransferOracle):
 
     It carries the cube over the red disc as usual; while hovering there it descends with
     probability ``1 / DELAY_STEPS`` at each step (a fresh draw from the episode's stream),
-    the only timing a policy without a clock has. Chance (`mikasa_bench.chance`): the
+    the only timing a policy without a clock has. Chance (`mikasa_bench.results.chance`): the
     window's share of the steps up to its end, an upper bound on such a constant-hazard
     descent. Kept: the waypoint queue (motion).
     """

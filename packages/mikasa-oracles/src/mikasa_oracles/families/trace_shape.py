@@ -235,7 +235,7 @@ class MemorylessTraceShapeOracle(Memoryless, TraceShapeOracle):
     drawn from ``CENTER_X_RANGE`` × ``CENTER_Y_RANGE`` (the lamp and the green cube stand at
     fixed spots; an env whose lamp follows the centre, ``LAMP_POSITION`` None, shows it:
     centre = lamp − ``LAMP_OFFSET``). All fixed per episode; it goes round each contour
-    ``PASSES`` times, blind. The tasks' chance (``mikasa_bench.chance``) is the rate at which such a guess
+    ``PASSES`` times, blind. The tasks' chance (``mikasa_bench.results.chance``) is the rate at which such a guess
     closes the true contours under the env's latch rules. Kept: the script's progress.
     """
 

@@ -38,8 +38,8 @@ from mikasa_bench.policies.remote.wire import (
     unpackb,
 )
 from mikasa_bench.policies.spec import PolicySpec, is_remote_target
+from mikasa_bench.protocol.tasks import load_benchmark_tasks
 from mikasa_bench.runners.episode import EpisodeRngs
-from mikasa_bench.tasks import load_benchmark_tasks
 
 __all__ = ["PolicyServer"]
 

@@ -2,7 +2,7 @@
 
 The benchmark's tasks are the rows of `mikasa_envs.manifest` (each family registers its own);
 every function that reads them accepts ``csv_path``, a manifest in the upstream format
-(semicolon-delimited, `MANIFEST_HEADER`; ``python -m mikasa_bench.tasks`` prints ours), to
+(semicolon-delimited, `MANIFEST_HEADER`; `manifest_csv_text` writes ours), to
 run another task list. Registration checks (is the id registered with Gymnasium in this
 installation?) live here too: a manifest passed with ``csv_path`` may name ids that no
 installed package registers.
@@ -23,8 +23,8 @@ from typing import Any
 
 from mikasa_envs.manifest import list_tasks
 
-from .errors import BenchError, UnknownTaskError
-from .protocol import SUPPORTED_SPLITS
+from mikasa_bench.errors import BenchError, UnknownTaskError
+from mikasa_bench.protocol import SUPPORTED_SPLITS
 
 __all__ = [
     "MANIFEST_HEADER",
@@ -326,13 +326,3 @@ def resolve_tasks(
             )
         out.append(by_id[env_id])
     return TaskSelection(out, env_ids=ids)
-
-
-def _main() -> int:
-    """``python -m mikasa_bench.tasks``: print the manifest in the upstream format."""
-    sys.stdout.write(manifest_csv_text())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(_main())
