@@ -9,8 +9,8 @@ Rules:
 - no module imports another module's ``_private`` name, nor a ``_private`` module of
   another package;
 - every source file holds at most ``MAX_LINES`` lines;
-- a package's declared dependencies on the project's packages are exactly those it imports
-  (an import that only an optional extra brings is declared in that extra).
+- a package's declared dependencies are exactly those it imports (an import that only an
+  optional extra brings is declared in that extra; extras may also hold constraints).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import re
 import sys
 from dataclasses import dataclass
 from functools import cache
+from importlib.metadata import packages_distributions
 from pathlib import Path
 
 import tomllib
@@ -201,38 +202,57 @@ def long_files() -> list[str]:
     return found
 
 
+def _normalise(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
 def _declared(pyproject: Path) -> tuple[set[str], dict[str, set[str]]]:
     project = tomllib.loads(pyproject.read_text(encoding="utf-8"))["project"]
 
     def names(reqs: list[str]) -> set[str]:
-        return {re.split(r"[<>=!~;\[ ]", r, maxsplit=1)[0].strip().lower() for r in reqs}
+        return {_normalise(re.split(r"[<>=!~;\[ ]", r, maxsplit=1)[0].strip()) for r in reqs}
 
     extras = {k: names(v) for k, v in project.get("optional-dependencies", {}).items()}
     return names(project.get("dependencies", [])), extras
 
 
+@cache
+def _installed_distributions() -> dict[str, set[str]]:
+    return {top: {_normalise(d) for d in dists} for top, dists in packages_distributions().items()}
+
+
+def _providers(top: str) -> set[str]:
+    """The distributions that can provide import name ``top``: the installed ones, else the
+    name itself (an optional dependency this environment lacks, e.g. ``lerobot``)."""
+    if top in PACKAGES:
+        return {PACKAGES[top][0]}
+    return _installed_distributions().get(top) or {_normalise(top)}
+
+
+def _third_party_or_project(top: str) -> bool:
+    return bool(top) and top != "__future__" and top not in sys.stdlib_module_names
+
+
 def dependency_mismatches(package: str) -> list[str]:
-    """Project packages imported but not declared (in dependencies or an extra), or declared
-    in ``dependencies`` but never imported."""
+    """Imports whose distribution is declared neither in ``dependencies`` nor in an extra, and
+    (once per distribution) required dependencies that no module of it imports. Extras may
+    hold constraints on what their packages pull in, so only ``dependencies`` must be used."""
     dist, base = PACKAGES[package]
     required, extras = _declared(base.parent / "pyproject.toml")
     optional = set().union(*extras.values()) if extras else set()
     own = {p for p, (d, _) in PACKAGES.items() if d == dist}
-    imported = {
-        PACKAGES[top][0]
-        for imp in all_imports(package)
-        if (top := imp.module.split(".")[0]) in PACKAGES and top not in own
-    }
-    project_dists = {d for d, _ in PACKAGES.values()}
-    found = [f"{package} imports {d} but does not declare it" for d in sorted(imported)
-             if d not in required | optional]
+    tops = {imp.module.split(".")[0] for imp in all_imports(package)}
+    found = [
+        f"{package} imports {top} ({' or '.join(sorted(_providers(top)))}) but does not declare it"
+        for top in sorted(t for t in tops if _third_party_or_project(t) and t not in own)
+        if not _providers(top) & (required | optional)
+    ]
     if package == min(own):  # one report per distribution
         used = set()
         for member in own:
-            used |= {PACKAGES[top][0] for imp in all_imports(member)
-                     if (top := imp.module.split(".")[0]) in PACKAGES}
-        found += [f"{dist} declares {d} but imports none of it" for d in sorted(required)
-                  if d in project_dists and d not in used]
+            for imp in all_imports(member):
+                used |= _providers(imp.module.split(".")[0])
+        found += [f"{dist} declares {d} but imports none of it" for d in sorted(required - used)]
     return found
 
 
