@@ -153,7 +153,7 @@ def add_task(family: TaskFamily, spec: TaskSpec, env_class: type, number: int | 
             raise ValueError(
                 f"{spec.env_id!r}: unknown {name} {value!r}; accepted values: {', '.join(accepted)}"
             )
-    known = _FAMILIES.setdefault(family.name, family)
+    known = _FAMILIES.get(family.name, family)
     if known is not family:
         raise ValueError(f"task family {family.name!r} is declared twice: {known} and {family}")
     if spec.family != family.name:
@@ -162,6 +162,7 @@ def add_task(family: TaskFamily, spec: TaskSpec, env_class: type, number: int | 
         raise ValueError(f"env id {spec.env_id!r} is registered twice")
     if number is not None and any(e.number == number for e in _TASKS.values()):
         raise ValueError(f"manifest number {number} of {spec.env_id!r} is taken")
+    _FAMILIES[family.name] = family
     _TASKS[spec.env_id] = _Entry(spec, number, env_class)
 
 
