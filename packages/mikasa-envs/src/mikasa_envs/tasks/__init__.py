@@ -20,4 +20,10 @@ for _module in sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.na
     importlib.import_module(f"{__name__}.{_module}")
 
 for _plugin in entry_points(group=TASK_PLUGIN_GROUP):
-    _plugin.load()
+    try:
+        _plugin.load()
+    except Exception as _exc:
+        raise ImportError(
+            f"the task entry point {_plugin.name} = {_plugin.value} (group {TASK_PLUGIN_GROUP}) "
+            f"failed to load: {type(_exc).__name__}: {_exc}"
+        ) from _exc
