@@ -50,6 +50,7 @@ SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 PINS=(
   "tensorflow-cpu==2.21.0"
   "tensorflow-datasets==4.9.10"
+  "absl-py>=1.0"
   # TFDS 4.9.10 touches importlib_resources for builders defined in an installed package
   # but does not declare it on Python >= 3.9.
   "importlib-resources>=6"
