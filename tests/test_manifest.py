@@ -87,6 +87,7 @@ def test_every_row_comes_from_its_family_module():
         assert cls.__module__ == f"mikasa_envs.tasks.{task.family}", task.env_id
         assert REGISTERED_ENVS[task.env_id].cls is cls
         assert get_family(task.family).name == task.family
+        assert get_family(task.family).hidden, f"{task.family} does not say what is hidden"
         assert cls.LANGUAGE_INSTRUCTION == task.language_instruction
 
 

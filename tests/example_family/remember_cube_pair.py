@@ -13,6 +13,7 @@ from mikasa_envs.tasks import remember_color
 
 FAMILY = TaskFamily(
     "remember_cube_pair",
+    hidden="the shown cube's colour: in view during the cue, nothing during the delay",
     overlays="color_memory",  # the overlay chain that draws the target colour on videos
     frozen_cue_on_short_ids=True,  # the robot stays still during the cue and the delay
     chance=remember_color.FAMILY.chance,  # a blind guess among the N cubes: 1/2

@@ -108,8 +108,9 @@ class RLVariant:
 class TaskFamily:
     """What the other packages need to know about one task family.
 
-    ``name``: the family's name (its env module's name). ``overlays``: the key of the render
-    overlay chain `mikasa_wrappers.overlays.OVERLAY_CHAINS` draws on its videos.
+    ``name``: the family's name (its env module's name). ``hidden``: what a policy must
+    remember, and when it is out of view (one line, for docs). ``overlays``: the key of the
+    render overlay chain `mikasa_wrappers.overlays.OVERLAY_CHAINS` draws on its videos.
     ``frozen_cue_on_short_ids``: the canonical chain freezes the robot during the cue and
     delay phases of its ids without ``-Long-`` (their training data was collected that way).
     ``wrapper_table_rank``: (short ids, ``-Long-`` ids) positions of the family in the
@@ -119,6 +120,7 @@ class TaskFamily:
     """
 
     name: str
+    hidden: str = ""
     overlays: str = "none"
     frozen_cue_on_short_ids: bool = False
     wrapper_table_rank: tuple[int, int] | None = None

@@ -12,6 +12,10 @@ from mikasa_envs.tasks.batteries_checker_hard import BatteriesCheckerHardVLABase
 
 FAMILY = TaskFamily(
     "batteries_checker_easy",
+    hidden=(
+        "which batteries lit the lamp, and which are checked: the lamp shows it for 7 steps "
+        "at each insertion"
+    ),
     overlays="batteries_checker",
     wrapper_table_rank=(27, 27),
     chance=batteries_checker_chance,

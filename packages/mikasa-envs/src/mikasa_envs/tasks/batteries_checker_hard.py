@@ -11,6 +11,10 @@ from mikasa_envs.tasks._batteries_checker import (
 
 FAMILY = TaskFamily(
     "batteries_checker_hard",
+    hidden=(
+        "which batteries lit the lamp, and which are checked: the lamp shows it while the "
+        "battery sits in the socket and 7 steps after"
+    ),
     overlays="batteries_checker",
     wrapper_table_rank=(28, 28),
     chance=batteries_checker_chance,

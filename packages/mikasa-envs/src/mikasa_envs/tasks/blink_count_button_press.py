@@ -45,6 +45,7 @@ def blink_count_chance(env_class: type, task: TaskSpec) -> Chance:
 
 FAMILY = TaskFamily(
     "blink_count_button_press",
+    hidden="the number of blinks, counted during the cue, and the presses made so far",
     overlays="blink_count",
     wrapper_table_rank=(29, 30),
     chance=blink_count_chance,

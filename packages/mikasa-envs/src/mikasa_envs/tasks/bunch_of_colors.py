@@ -25,6 +25,7 @@ def color_set_chance(env_class: type, task: TaskSpec) -> Chance:
 
 FAMILY = TaskFamily(
     "bunch_of_colors",
+    hidden="the set of shown cubes: in view together during the cue, nothing during the delay",
     overlays="memory_capacity",
     wrapper_table_rank=(21, 22),
     chance=color_set_chance,

@@ -14,6 +14,10 @@ from mikasa_envs.tasks._ordered_color_sequence import (
 
 FAMILY = TaskFamily(
     "chain_of_colors",
+    hidden=(
+        "the shown cubes and their order: one at a time during the cue, nothing during the "
+        "delay"
+    ),
     overlays="memory_capacity",
     wrapper_table_rank=(25, 26),
     chance=color_sequence_chance,

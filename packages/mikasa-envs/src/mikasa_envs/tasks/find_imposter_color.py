@@ -8,6 +8,10 @@ from mikasa_envs.tasks._selection import ColorCubesMixin, FindImposterVLABaseEnv
 
 FAMILY = TaskFamily(
     "find_imposter_color",
+    hidden=(
+        "which colours were shown: in view during the cue, nothing during the delay, then all "
+        "N permuted"
+    ),
     overlays="color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(18, 18),

@@ -9,6 +9,10 @@ from mikasa_envs.tasks._selection import BlueShapesMixin, FindImposterVLABaseEnv
 
 FAMILY = TaskFamily(
     "find_imposter_shape",
+    hidden=(
+        "which shapes were shown: in view during the cue, nothing during the delay, then all "
+        "N permuted"
+    ),
     overlays="shape_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(19, 19),

@@ -14,6 +14,10 @@ from mikasa_envs.tasks._selection import (
 
 FAMILY = TaskFamily(
     "find_imposter_shape_and_color",
+    hidden=(
+        "which shape-colour pairs were shown: in view during the cue, nothing during the "
+        "delay, then all N permuted"
+    ),
     overlays="shape_color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(20, 20),

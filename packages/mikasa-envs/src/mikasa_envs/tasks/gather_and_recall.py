@@ -25,6 +25,10 @@ def gather_and_recall_chance(env_class: type, task: TaskSpec) -> Chance:
 
 FAMILY = TaskFamily(
     "gather_and_recall",
+    hidden=(
+        "the flash colour: the lamp flashes once, for 8-14 steps, while the robot gathers the "
+        "cubes"
+    ),
     overlays="step_reward",
     wrapper_table_rank=(35, 35),
     chance=gather_and_recall_chance,

@@ -18,6 +18,10 @@ from mikasa_envs.tasks._intercept import (
 
 FAMILY = TaskFamily(
     "intercept",
+    hidden=(
+        "the ball's path: in view for its first 10 frames, then unseen until the robot "
+        "touches it"
+    ),
     overlays="intercept",
     wrapper_table_rank=(7, 7),
     chance=intercept_chance,

@@ -12,6 +12,10 @@ from mikasa_envs.tasks._intercept import RL_BALL_IN_VIEW, InterceptBallVLABaseEn
 
 FAMILY = TaskFamily(
     "intercept_grab",
+    hidden=(
+        "the ball's path: in view for its first 10 frames, then unseen until the robot "
+        "touches it"
+    ),
     overlays="intercept",
     wrapper_table_rank=(8, 8),
     chance=intercept_chance,

@@ -13,6 +13,7 @@ from mikasa_envs.tasks._selection import (
 
 FAMILY = TaskFamily(
     "remember_color",
+    hidden="the shown cube's colour: in view during the cue, nothing during the delay",
     overlays="color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(12, 13),

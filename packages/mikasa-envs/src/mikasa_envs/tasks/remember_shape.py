@@ -13,6 +13,7 @@ from mikasa_envs.tasks._selection import (
 
 FAMILY = TaskFamily(
     "remember_shape",
+    hidden="the shown object's shape: in view during the cue, nothing during the delay",
     overlays="shape_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(14, 15),

@@ -14,6 +14,7 @@ from mikasa_envs.tasks._selection import (
 
 FAMILY = TaskFamily(
     "remember_shape_and_color",
+    hidden="the shown object's shape and colour: in view during the cue, nothing during the delay",
     overlays="shape_color_memory",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(16, 17),

@@ -12,6 +12,10 @@ from mikasa_envs.tasks._rotate import MODE_POS, MODE_POS_NEG, RotatePegVLABaseEn
 
 FAMILY = TaskFamily(
     "rotate_lenient",
+    hidden=(
+        "how far the peg has turned: its start heading is seen only at the start, and it "
+        "looks the same after a half turn"
+    ),
     overlays="rotate",
     wrapper_table_rank=(9, 9),
     chance=rotate_chance,

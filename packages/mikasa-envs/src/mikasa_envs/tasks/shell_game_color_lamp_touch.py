@@ -8,6 +8,10 @@ from mikasa_envs.tasks._shell_game import ColorLampShellGameVLABaseEnv, shell_ga
 
 FAMILY = TaskFamily(
     "shell_game_color_lamp_touch",
+    hidden=(
+        "which coloured ball lay at which place: in view during the cue, under the mugs when "
+        "the lamp lights"
+    ),
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(4, 4),

@@ -18,6 +18,7 @@ from mikasa_envs.tasks._shell_game import (
 
 FAMILY = TaskFamily(
     "shell_game_pick",
+    hidden="which mug hides the ball: the ball is in view during the cue, under a mug from then on",
     chance=shell_game_chance,
     rl_variants=(
         RLVariant(

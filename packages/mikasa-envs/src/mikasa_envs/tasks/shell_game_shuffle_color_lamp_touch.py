@@ -13,6 +13,10 @@ from mikasa_envs.tasks._shell_game import (
 
 FAMILY = TaskFamily(
     "shell_game_shuffle_color_lamp_touch",
+    hidden=(
+        "where each coloured ball lay: in view during the cue, tracked through the shuffle; "
+        "the lamp's colour comes only after it"
+    ),
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(3, 6),

@@ -17,6 +17,10 @@ from mikasa_envs.tasks._shell_game import (
 
 FAMILY = TaskFamily(
     "shell_game_shuffle_touch",
+    hidden=(
+        "which mug hides the ball: the ball is in view during the cue; the mug is tracked "
+        "while the mugs swap places"
+    ),
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(2, 5),

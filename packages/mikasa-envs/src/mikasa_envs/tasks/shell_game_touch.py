@@ -13,6 +13,7 @@ from mikasa_envs.tasks._shell_game import (
 
 FAMILY = TaskFamily(
     "shell_game_touch",
+    hidden="which mug hides the ball: the ball is in view during the cue, under a mug from then on",
     overlays="shell_game",
     frozen_cue_on_short_ids=True,
     wrapper_table_rank=(0, 0),

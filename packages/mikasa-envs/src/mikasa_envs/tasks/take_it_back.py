@@ -56,6 +56,10 @@ def take_it_back_chance(env_class: type, task: TaskSpec) -> Chance:
 
 FAMILY = TaskFamily(
     "take_it_back",
+    hidden=(
+        "the cube's start spot: unmarked for the cameras, known only from where the cube "
+        "stood before the push"
+    ),
     overlays="intercept",
     wrapper_table_rank=(11, 11),
     chance=take_it_back_chance,

@@ -45,6 +45,7 @@ def timed_transfer_chance(env_class: type, task: TaskSpec) -> Chance:
 
 FAMILY = TaskFamily(
     "timed_transfer",
+    hidden="the steps since the lamp turned green: nothing in view counts them",
     overlays="timed_transfer",
     wrapper_table_rank=(33, 34),
     chance=timed_transfer_chance,

@@ -25,6 +25,7 @@ from mikasa_envs.tasks._trace_shape_chance import trace_shape_chance
 
 FAMILY = TaskFamily(
     "trace_shape",
+    hidden="the demonstrated contour: traced by the red cube during the cue, then gone",
     overlays="trace_shape",
     wrapper_table_rank=(31, 31),
     chance=trace_shape_chance,

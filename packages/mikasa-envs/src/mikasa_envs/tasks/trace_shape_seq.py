@@ -27,6 +27,7 @@ from mikasa_envs.tasks._trace_shape_chance import trace_shape_chance
 
 FAMILY = TaskFamily(
     "trace_shape_seq",
+    hidden="the demonstrated contours and their order: traced during the cue, then gone",
     overlays="trace_shape",
     wrapper_table_rank=(32, 32),
     chance=trace_shape_chance,
