@@ -1,6 +1,6 @@
 """A family written outside the packages (tests/example_family: its env file and its oracle,
 nothing else) works through every door: gym.make, the wrapper chain, ``mikasa-bench run``,
-``mikasa-collect`` and ``mikasa-bench gallery``. The walk-through is docs/adding-a-task.md.
+``mikasa-collect`` and ``mikasa-bench gallery``. The walk-through is docs/contributing/adding-a-task.md.
 
 The family registers through the entry-point groups ``mikasa_envs.tasks`` and
 ``mikasa_oracles.families``, here from a distribution's metadata on PYTHONPATH, as an

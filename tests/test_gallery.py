@@ -5,12 +5,11 @@ scripts/setup.sh installs)."""
 from __future__ import annotations
 
 import json
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from browser import browse, wood_share
 from mikasa_bench.cli import main
 from mikasa_bench.media.gallery import FrameRecorder, compose_gallery_frame
 from PIL import Image, ImageSequence
@@ -31,25 +30,6 @@ CARD_FIELDS = {
     "episode",
     "image",
 }
-
-
-def _browser() -> str:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        if path := shutil.which(name):
-            return path
-    raise AssertionError("no headless browser: install Debian's chromium (scripts/setup.sh does)")
-
-
-def _browse(*args: str) -> str:
-    cmd = [
-        _browser(),
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--virtual-time-budget=5000",
-        *args,
-    ]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=True).stdout
 
 
 @pytest.fixture(scope="module")
@@ -83,22 +63,16 @@ def test_gallery_resumes_without_rendering_again(gallery: Path) -> None:
 
 def test_gallery_page_in_a_headless_browser(gallery: Path, tmp_path: Path) -> None:
     url = (gallery / "index.html").as_uri()
-    dom = _browse("--dump-dom", url)
+    dom = browse("--dump-dom", url)
     assert 'data-loaded="2" data-total="2"' in dom, "not every animation loaded in the browser"
     for task in TASKS:
         assert f'id="{task}"' in dom
     shot = tmp_path / "page.png"
-    _browse("--window-size=1200,1400", f"--screenshot={shot}", url)
+    browse("--window-size=1200,1400", f"--screenshot={shot}", url)
     pixels = np.asarray(Image.open(shot).convert("RGB"))
     assert pixels.shape == (1400, 1200, 3)
     # The animations' wood-coloured table is on the page, not a blank one.
-    wood = (
-        (pixels[..., 0] > 150)
-        & (pixels[..., 1] > 60)
-        & (pixels[..., 1] < 140)
-        & (pixels[..., 2] < 90)
-    )
-    assert wood.mean() > 0.02
+    assert wood_share(pixels) > 0.02
 
 
 def test_gallery_unknown_task_is_a_clear_error(
