@@ -31,7 +31,7 @@ from mikasa_robo_rl.manifest import (
     rl_env_ids,
 )
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def make(env_id: str, **kwargs: Any) -> gym.Env:

@@ -49,7 +49,7 @@ from .runners.executor import InlineExecutor, LocalExecutor, make_executor
 from .runners.jobs import EpisodeJob, EpisodeOutcome, Executor
 from .runners.runner import evaluate_benchmark, evaluate_task, execute_runs
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "START_SEED",

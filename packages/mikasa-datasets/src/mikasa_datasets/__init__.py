@@ -24,7 +24,7 @@ from mikasa_datasets.npz import (
     write_metadata,
 )
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "BATCHED_TMP_SUBDIR",

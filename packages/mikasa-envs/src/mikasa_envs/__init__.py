@@ -23,7 +23,7 @@ from mikasa_envs.manifest import (
     unknown_env_id_message,
 )
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def registered_env_ids() -> list[str]:

@@ -20,7 +20,7 @@ from mikasa_oracles.registry import (
 )
 from mikasa_oracles.rollout import Rollout, ZeroActions, rollout
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def has_oracle(env_id: str) -> bool:

@@ -17,6 +17,6 @@ from .apply_wrappers import *  # noqa: F403
 from .overlays import *  # noqa: F403
 from .wrappers import *  # noqa: F403
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [*apply_wrappers.__all__, *wrappers.__all__, *overlays.__all__, "__version__"]
