@@ -45,7 +45,7 @@ class Rollout:
 def reset_with_seed(policy: Any, seed: int | None) -> None:
     """``policy.reset(seed=seed)`` where ``reset`` takes a seed (e.g. a memoryless oracle,
     whose guesses it seeds), else ``policy.reset()``; no-op for a policy without ``reset``.
-    (mikasa-bench's ``reset_policy`` is this function.)"""
+    (mikasa-bench's ``reset_policy`` does the same.)"""
     reset = getattr(policy, "reset", None)
     if not callable(reset):
         return

@@ -7,11 +7,10 @@ import logging
 import os
 from pathlib import Path
 
-from mikasa_oracles import has_oracle
-
 from mikasa_bench.cli.common import eprint, parse_policy_kwargs
 from mikasa_bench.errors import BenchError
 from mikasa_bench.policies.loading import resolve_policy
+from mikasa_bench.policies.oracle_extra import ORACLES_INSTALL_COMMAND, require_oracles
 from mikasa_bench.policies.remote.server import PolicyServer
 from mikasa_bench.protocol.tasks import registered_env_ids, select_benchmark_tasks
 from mikasa_bench.reference import is_reference
@@ -36,6 +35,10 @@ def cmd_list(args: argparse.Namespace) -> int:
             )
         tasks = [t for t in tasks if t.memory_type == args.memory_type]
     registered = registered_env_ids()
+    try:
+        has_oracle = require_oracles().has_oracle
+    except BenchError:
+        has_oracle = None  # without the oracles extra the column says "n/a"
     rows = []
     for t in tasks:
         reg = t.env_id in registered
@@ -48,7 +51,7 @@ def cmd_list(args: argparse.Namespace) -> int:
                 t.memory_type,
                 str(t.max_episode_steps),
                 "yes" if reg else "no",
-                "yes" if has_oracle(t.env_id) else "no",
+                "n/a" if has_oracle is None else "yes" if has_oracle(t.env_id) else "no",
             ]
         )
     print(
@@ -58,6 +61,8 @@ def cmd_list(args: argparse.Namespace) -> int:
     )
     n_reg = sum(r[4] == "yes" for r in rows)
     print(f"\n{len(rows)} task(s), {n_reg} registered")
+    if has_oracle is None:
+        print(f"Oracle n/a: mikasa-oracles is not installed ({ORACLES_INSTALL_COMMAND})")
     return 0
 
 

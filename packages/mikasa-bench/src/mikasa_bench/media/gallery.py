@@ -36,6 +36,7 @@ from mikasa_bench.errors import BenchError
 from mikasa_bench.media.gallery_html import write_index
 from mikasa_bench.media.render import apply_environment
 from mikasa_bench.policies.loading import build_policy, resolve_policy
+from mikasa_bench.policies.oracle_extra import require_oracles
 from mikasa_bench.protocol import START_SEED, SUPPORTED_SPLITS, BenchmarkConfig
 from mikasa_bench.protocol.tasks import registered_env_ids, resolve_tasks
 from mikasa_bench.results.chance import task_chance
@@ -275,6 +276,7 @@ def build_gallery(
         raise ValueError(f"workers must be >= 1, got {workers}")
     if scale < 1:
         raise ValueError(f"scale must be >= 1, got {scale}")
+    require_oracles("the gallery (an oracle episode per task)")  # before the workers start
     out = Path(out_dir)
     (out / "tasks").mkdir(parents=True, exist_ok=True)
     todo = [e for e in env_ids if not (out / "tasks" / f"{e}.json").exists()]

@@ -8,6 +8,8 @@ remote and LeRobot policies.
 * `mikasa_bench.policies.spec`: `PolicySpec`, the picklable description workers build from;
 * `mikasa_bench.policies.loading`: `resolve_policy` (main process) and `build_policy`
   (worker);
+* `mikasa_bench.policies.oracle_extra`: `require_oracles`, mikasa-oracles (the ``oracles``
+  extra) or an error naming the command that installs it;
 * `mikasa_bench.policies.remote`: policies served over a websocket (client, wire format,
   server).
 

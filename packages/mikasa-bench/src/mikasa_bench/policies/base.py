@@ -12,6 +12,7 @@ A policy is any object with
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, Protocol, runtime_checkable
 
 __all__ = ["ACTION_SHAPE", "ChunkPolicy", "policy_chunk_size", "reset_policy"]
@@ -41,9 +42,18 @@ def policy_chunk_size(policy: Any) -> int:
     return k_int
 
 
-def reset_policy(policy: Any, seed: int) -> None:
+def reset_policy(policy: Any, seed: int | None) -> None:
     """Call ``policy.reset(seed=seed)`` or ``policy.reset()``, whichever it accepts; no-op
-    for policies without ``reset`` (the oracles' rollout does the same)."""
-    from mikasa_oracles.rollout import reset_with_seed
-
-    reset_with_seed(policy, seed)
+    for policies without ``reset`` (the oracles' rollout does the same; the bench keeps its
+    own copy so that policies other than the oracles run without mikasa-oracles)."""
+    reset = getattr(policy, "reset", None)
+    if not callable(reset):
+        return
+    try:
+        params = inspect.signature(reset).parameters
+    except (TypeError, ValueError):  # builtins without a signature
+        params = {}
+    if "seed" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        reset(seed=seed)
+    else:
+        reset()

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from mikasa_bench.policies.base import ACTION_SHAPE, policy_chunk_size
+from mikasa_bench.policies.oracle_extra import require_oracles
 
 __all__ = [
     "BUILTIN_POLICIES",
@@ -78,15 +79,13 @@ class DummyChunkPolicy:
 
 
 def _make_oracle(env: Any, **kwargs: Any) -> Any:
-    from mikasa_oracles import make_oracle
-
-    return make_oracle(env, **kwargs)
+    return require_oracles("the oracle policy").make_oracle(env, **kwargs)
 
 
 def _make_memoryless_oracle(env: Any, **kwargs: Any) -> Any:
-    from mikasa_oracles import make_oracle
-
-    return make_oracle(env, memoryless=True, **kwargs)
+    return require_oracles("the oracle-memoryless policy").make_oracle(
+        env, memoryless=True, **kwargs
+    )
 
 
 ORACLE_TARGETS: tuple[str, ...] = ("oracle", "oracle-memoryless")

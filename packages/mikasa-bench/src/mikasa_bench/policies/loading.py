@@ -22,6 +22,7 @@ from mikasa_bench.errors import BenchError
 from mikasa_bench.lerobot.policy import lerobot_policy_factory, resolve_lerobot_policy
 from mikasa_bench.policies.base import ACTION_SHAPE, policy_chunk_size
 from mikasa_bench.policies.builtin import BUILTIN_POLICIES, ORACLE_TARGETS
+from mikasa_bench.policies.oracle_extra import require_oracles
 from mikasa_bench.policies.remote.client import remote_policy_factory, resolve_remote_policy
 from mikasa_bench.policies.spec import PolicySpec, is_lerobot_target, is_remote_target
 
@@ -127,6 +128,8 @@ def resolve_policy(name: str, kwargs: dict[str, Any] | None = None) -> PolicySpe
         return resolve_remote_policy(name, kwargs)
     if is_lerobot_target(name):
         return resolve_lerobot_policy(name, kwargs)
+    if name in ORACLE_TARGETS:
+        require_oracles(f"the {name} policy")  # the missing extra named before workers start
     if name in BUILTIN_POLICIES:
         target, label = name, name
     else:
@@ -159,8 +162,7 @@ def check_policy_supports(spec: PolicySpec, env_ids: Sequence[str]) -> None:
     some families)."""
     if spec.target not in ORACLE_TARGETS:
         return
-    from mikasa_oracles import has_oracle
-
+    has_oracle = require_oracles(f"the {spec.target} policy").has_oracle
     missing = [e for e in env_ids if not has_oracle(e)]
     if missing:
         raise BenchError(
