@@ -5,9 +5,10 @@ gallery`` (`mikasa_bench.cli`; see the README). Library: the protocol constants,
 selection, the policy interface, the episode loop, the parallel resumable runner and the
 result helpers are re-exported here (the README's "Python API" table lists them).
 
-Layout: the benchmark's definition at the top (`protocol`, `tasks`, `chance`, `metrics`,
-`errors`), the machinery in subpackages: `policies` (with `policies.remote`), `runners`,
-`results`, `media`, `lerobot`, `cli`, and the shipped result sets in `reference`.
+Layout: `errors` at the top; the benchmark's definition in `protocol` (settings) and
+`protocol.tasks` (the tasks of the manifest); the machinery in subpackages: `policies` (with
+`policies.remote`), `runners`, `results` (with `metrics` and `chance`), `media`, `lerobot`,
+`cli`, and the shipped result sets in `reference`.
 """
 
 from .errors import (
