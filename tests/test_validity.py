@@ -180,3 +180,20 @@ def test_validity_update_keeps_the_rows_of_tasks_not_rerun(tmp_path, capsys):
 
     assert validity.main([str(second), "--out", str(out), "--update", str(tmp_path / "nope.json")]) == 2
     assert "cannot read the earlier table" in capsys.readouterr().err
+
+
+def test_the_shipped_table_rewrites_from_its_json_alone(tmp_path):
+    """``mikasa-bench validity --update docs/VALIDITY.json`` with no run directories rewrites
+    the shipped table as it is: the same rows, opening with its headline."""
+    from pathlib import Path
+
+    shipped = Path(__file__).resolve().parents[1] / "docs" / "VALIDITY.json"
+    earlier = tmp_path / "VALIDITY.json"
+    earlier.write_text(shipped.read_text(encoding="utf-8"), encoding="utf-8")
+    md, js, rows = validity.write_validity([], tmp_path / "VALIDITY.md", update=earlier)
+    assert json.loads(js.read_text())["tasks"] == json.loads(shipped.read_text())["tasks"]
+    text = md.read_text(encoding="utf-8")
+    assert text.splitlines()[2].startswith("**The oracle reaches at least 95% on")
+    assert len(rows) == 90
+    with pytest.raises(validity.BenchError, match="give result directories"):
+        validity.write_validity([], tmp_path / "x.md")
