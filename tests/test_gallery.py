@@ -22,6 +22,7 @@ CARD_FIELDS = {
     "memory_type",
     "split",
     "horizon",
+    "description",
     "hidden",
     "phases",
     "randomizations",

@@ -199,6 +199,7 @@ def _phase_text(base: Any) -> str:
 
 def task_card(env_id: str, env: Any) -> dict[str, Any]:
     """What the page says about ``env_id`` (``env``: the made env, for its class)."""
+    from mikasa_envs.family import get_family
     from mikasa_envs.manifest import get_task
 
     spec, chance = get_task(env_id), task_chance(env_id)
@@ -211,7 +212,8 @@ def task_card(env_id: str, env: Any) -> dict[str, Any]:
         "memory_type": spec.memory_type,
         "split": spec.split or "extra",
         "horizon": int(spec.max_episode_steps),
-        "hidden": sections.get("Task Description", ""),
+        "description": sections.get("Task Description", ""),
+        "hidden": get_family(spec.family).hidden,
         "phases": _phase_text(base),
         "randomizations": sections.get("Randomizations", ""),
         "success_condition": sections.get("Success Conditions", ""),

@@ -51,6 +51,7 @@ def _card(card: Mapping[str, Any]) -> str:
     )
     chance = card["chance"]
     rows = [
+        ("Task", e(card["description"])),
         ("Instruction", e(card["instruction"])),
         ("Memory type", e(card["memory_type"])),
         ("Split / horizon", f"{e(card['split'])} / {card['horizon']} steps"),
