@@ -138,6 +138,7 @@ def render_markdown(t: Mapping[str, Any]) -> str:
     cols = [(r, REFERENCE_LABELS.get(r, r)) for r in t["references"]]
     cols += [(s, v["label"]) for s, v in settings.items()]
     parts = [
+        _headline(t),
         _results(t, cols),
         _finding(t),
         _runs(t),
@@ -147,6 +148,30 @@ def render_markdown(t: Mapping[str, Any]) -> str:
     return "\n".join(line for part in parts for line in part) + "\n"
 
 
+def _headline(t: Mapping[str, Any]) -> list[str]:
+    """The title and one sentence: where the memoryless and the history policies stand."""
+    memoryless = [0, 0]  # (at or below chance, evaluated)
+    history = [0, 0]  # (above chance, evaluated)
+    for row in t["rows"]:
+        for s, v in t["settings"].items():
+            verdict = row["cells"][s]["vs_chance"]
+            if not verdict:
+                continue
+            if v["memoryless"]:
+                memoryless[0] += verdict in ("at chance", "below")
+                memoryless[1] += 1
+            else:
+                history[0] += verdict == "above"
+                history[1] += 1
+    sentence = (
+        f"**Policies that see one frame stay at or below chance on {memoryless[0]} of their "
+        f"{memoryless[1]} task results"
+    )
+    if history[1]:
+        sentence += f"; with a history of frames they rise above chance on {history[0]} of {history[1]}"
+    return ["# LeRobot baselines on MIKASA-Robo-VLA (trained from scratch)\n", sentence + ".**\n"]
+
+
 def _results(t: Mapping[str, Any], cols: list[tuple[str, str]]) -> list[str]:
     """The title, what the numbers mean, the results table and the settings' legend."""
     settings = t["settings"]
@@ -154,7 +179,6 @@ def _results(t: Mapping[str, Any], cols: list[tuple[str, str]]) -> list[str]:
         "complete" if t["done"] == t["total"] else f"{t['done']} of {t['total']} results so far"
     )
     out = [
-        "# LeRobot baselines on MIKASA-Robo-VLA (trained from scratch)\n",
         f"Generated {t['generated']} by `baselines/lerobot/run_baselines.py` from the records in "
         f"`{t['out']}/records` ({status}; scale `{t['scale']}`). Do not edit by hand: re-run "
         f"the driver (`--stages table` rewrites this file from the records alone).\n",
