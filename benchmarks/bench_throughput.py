@@ -24,7 +24,7 @@ per-episode results of all runs are identical (they must be: zero policy, same s
     python benchmarks/bench_throughput.py --repeats 3            # shared machine: best of 3
     python benchmarks/bench_throughput.py --obs-mode state --tasks RememberColor3-VLA-v0
 
-On a 16-core GPU machine (4 envs per GPU-rendering worker by default, ``--envs-per-worker``;
+On a machine with one NVIDIA GPU and 16 CPU cores (4 envs per GPU-rendering worker by default, ``--envs-per-worker``;
 ``--reference-serial`` also times the serial loop with ManiSkill's own rendering; lavapipe
 needed for CPU rendering: mesa-vulkan-drivers):
 
@@ -35,10 +35,10 @@ needed for CPU rendering: mesa-vulkan-drivers):
         --gpu-render-workers 2 --json gpu16_mixed2.json
 
 Targets (steady-state ratio): >= 1.8x with 2 workers on a 2-core machine, >= 12x with 16
-workers on a 16-core GPU machine, over the serial reference runner where it was timed
+workers on a machine with one NVIDIA GPU and 16 CPU cores, over the serial reference runner where it was timed
 (``--reference-serial``: one env, one process, ManiSkill's per-camera rendering and robot
 meshes, i.e. the reference runner's loop), else over our own serial loop (stricter: our
-env's rendering makes a serial loop faster too). On the GPU machine the parallel rate is
+env's rendering makes a serial loop faster too). With a GPU the parallel rate is
 bounded by the GPU's graphics throughput, not by the cores: render-only, with no physics,
 an H100 draws at most 1,750-2,400 scenes (two 128x128 cameras) per second however the work
 is split over processes (`gpu_render_ceiling.py`; the robot's 53k vertices are most of the

@@ -26,7 +26,7 @@ frames`` and projects every task as ``start-up + episodes x (a + b x frames per 
 (envs x yield)`` (envs: worker processes x envs per process), where ``yield`` is the family's share of successful attempts and
 start-up (the workers' imports and first scene, paid once per task) is the median over the
 runs. Short runs are dominated by start-up and under-state the steady rate several times
-(on the GPU machine 32 episodes on 16 workers ran at 1/2-1/6 of the rate 256 did); without
+(on a machine with one NVIDIA GPU and 16 CPU cores 32 episodes on 16 workers ran at 1/2-1/6 of the rate 256 did); without
 two long runs the projection falls back to each family's after-start-up rate and says that
 it is pessimistic.
 

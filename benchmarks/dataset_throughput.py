@@ -9,7 +9,7 @@ Reports frames/s (wall clock, library imports excluded), CPU seconds (all thread
 CPU-ms per frame, the machine's load average around each run (this box is shared: a load
 above the core count inflates wall time), and the video PSNR of the LeRobot output against
 the NPZ frames. Targets: >= 1,000 frames/s NPZ -> RLDS, >= 300 frames/s for the
-LeRobot paths on the 2-core machine.
+LeRobot paths on a 2-core CPU machine.
 
 Collection throughput (oracle episodes per minute, the whole plan projected) is
 ``benchmarks/collect_throughput.py``.

@@ -5,8 +5,7 @@
 #
 # Why a separate environment: lerobot 0.4.x (the line that writes LeRobotDataset v3.0 on
 # Python 3.11) pins torch<2.11, while this repository's dev environment runs torch 2.13.0
-# CPU (the only torch on this machine's local wheel cache; any other version pulls multi-GB
-# CUDA wheels). TensorFlow and lerobot *can* share one environment, so RLDS and LeRobot live
+# CPU (a CUDA torch would pull multi-GB wheels). TensorFlow and lerobot *can* share one environment, so RLDS and LeRobot live
 # together here: the RLDS -> LeRobot converter needs both in one process.
 #
 # What it installs (see packages/mikasa-datasets/README.md, "Conversion environment", and
@@ -159,7 +158,7 @@ rm -f "$stamp"
 t0=$SECONDS
 # One resolver run for everything but lerobot, so torchvision/torchcodec are matched to the
 # CPU torch 2.13.0 instead of dragging in another torch.
-# (the grep drops pip's notes about this machine's partial local package mirrors)
+# (the grep drops pip's notes about local package mirrors it cannot read)
 "$VENV/bin/python" -m pip install -q "${PINS[@]}" 2> >(grep -v "is ignored: it is neither" >&2)
 echo "[datasets-env] format libraries: $((SECONDS - t0)) s"
 # lerobot without its dependency pins (torch<2.11, torchvision<0.26, wandb, ...): its dataset

@@ -1,6 +1,6 @@
 """The GPU camera-group path: what can be checked without a GPU.
 
-The pixels themselves are compared with ManiSkill's per-camera path on the GPU machine
+The pixels themselves are compared with ManiSkill's per-camera path on a GPU
 (``benchmarks/gpu_camera_group_check.py``); here: the pose rows it uploads
 are the right entities' poses, CPU rendering never takes the path, and its direct read of
 the pictures gives ManiSkill's observations exactly.

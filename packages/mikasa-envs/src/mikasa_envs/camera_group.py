@@ -28,7 +28,7 @@ turns it off.
 With a CPU render device (lavapipe) and the same conditions but the device,
 `read_rgb_pictures` reads ManiSkill's pictures without its copy through ``torch.tensor``.
 Copies of 49-65k values go to torch's intra-op thread pool, whose threads then spin
-between steps: with them, one env kept all 16 cores of the GPU machine busy (73 CPU-ms per
+between steps: with them, one env kept all 16 cores of a machine with one NVIDIA GPU and 16 CPU cores busy (73 CPU-ms per
 step instead of 3) and ran 20% slower. Images here are copied by numpy instead.
 """
 
@@ -181,7 +181,7 @@ class CameraGroupRenderer:
         self._copied.synchronize()
         # Copies, as the pinned buffer is reused by the next render; made by numpy, as a torch
         # copy of 49k values goes to torch's thread pool, whose threads then spin between
-        # steps (one env kept all 16 cores of the GPU machine busy, and ran 20% slower).
+        # steps (one env kept all 16 cores of a machine with one NVIDIA GPU and 16 CPU cores busy, and ran 20% slower).
         out, i = [], 0
         for names in self.names:
             out.append(

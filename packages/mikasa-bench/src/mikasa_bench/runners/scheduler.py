@@ -20,7 +20,7 @@ class Scheduler:
     needs a new env joins the task with the fewest workers on it (then the one with the
     most env steps left, so long-horizon tasks start early and do not trail the run), so
     workers spread over tasks instead of all building every task's env in turn: measured
-    on the GPU machine, an env build costs 2-5 s while 16 workers build at once, as much as
+    on a machine with one NVIDIA GPU and 16 CPU cores, an env build costs 2-5 s while 16 workers build at once, as much as
     ~40 short episodes. Which worker runs an episode never changes its
     result (the workers replay a scene's earlier episodes if they must)."""
 

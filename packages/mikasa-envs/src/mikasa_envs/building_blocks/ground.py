@@ -5,7 +5,7 @@ triangles, more than any robot link, for a plane. Its texture coordinates are an
 function of position, so a coarser grid over the same extent with the same affine map
 rasterises the same texels (perspective-correct interpolation is exact on a plane). The
 grid keeps 10 m cells rather than two triangles so no triangle is so large that clipping
-at the near plane loses precision. Rendering cost matters: on the GPU machine, triangles
+at the near plane loses precision. Rendering cost matters: on an NVIDIA H100 or H200, triangles
 are what limits many processes sharing one GPU (see camera_group.py), and on lavapipe
 every vertex is CPU work.
 """

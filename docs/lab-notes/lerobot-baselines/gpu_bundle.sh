@@ -2,9 +2,9 @@
 # The lerobot side of a GPU machine without network (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
-#   bash baselines/lerobot/gpu_bundle.sh download     # here: the wheels, into .carry/ (~91 MB)
-#   source baselines/lerobot/gpu_bundle.sh env        # there, in each call's command
-#   bash baselines/lerobot/gpu_bundle.sh check        # there, after env: what imports, what is missing
+#   bash docs/lab-notes/lerobot-baselines/gpu_bundle.sh download     # here: the wheels, into .carry/ (~91 MB)
+#   source docs/lab-notes/lerobot-baselines/gpu_bundle.sh env        # there, in each call's command
+#   bash docs/lab-notes/lerobot-baselines/gpu_bundle.sh check        # there, after env: what imports, what is missing
 #
 # "download" fetches lerobot 0.4.4 (--no-deps) and what its dataset, training and the two
 # policies' code import beyond the image (the list below), for cp312 manylinux, into
@@ -27,7 +27,7 @@
 # videos that way (`torchcodec._core.get_ffmpeg_library_versions()` -> 7.1.1).
 
 _here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-_root=$(cd "$_here/../.." && pwd)
+_root=$(cd "$_here/../../.." && pwd)
 _wheels=$_root/.carry/lerobot_wheels
 _av=$_root/.carry/lerobot_av  # PyAV alone (40 MB): with the rest, one carry would pass 64 MiB
 
