@@ -27,6 +27,7 @@ __all__ = [
     "train_flags",
     "model_flags",
     "flag_diff",
+    "memory_train_argv",
 ]
 
 DEFAULT_TASKS = (
@@ -37,7 +38,7 @@ DEFAULT_TASKS = (
     "BlinkCountButtonPressEasy-VLA-v0",
     "TakeItBack-VLA-v0",
 )
-DEFAULT_SETTINGS = ("act", "diffusion", "diffusion-hist")
+DEFAULT_SETTINGS = ("act", "diffusion", "diffusion-hist", "memory-gru")
 DEFAULT_REFERENCES = ("oracle", "oracle-memoryless")
 
 # Keys of the training flags that do not define the model (they may change between calls);
@@ -67,6 +68,9 @@ class Setting:
     args: Mapping[str, str]
     tiny_args: Mapping[str, str] = field(default_factory=dict)
     memoryless: bool = False
+    # "lerobot-train", or "memory": baselines/memory's whole-episode trainer (same flags
+    # dict; `memory_train_argv` turns it into that trainer's command line).
+    trainer: str = "lerobot-train"
 
 
 def horizon(history: int, future: int, factor: int) -> int:
@@ -134,6 +138,15 @@ def make_settings(history: int) -> dict[str, Setting]:
             "policy.num_inference_steps": "2",
         }
 
+    memory_tiny = {
+        "policy.vision_channels": "[8,16,16]",
+        "policy.vision_dim": "32",
+        "policy.state_dim": "16",
+        "policy.instruction_dim": "8",
+        "policy.hidden_dim": "32",
+        "policy.head_dim": "32",
+    }
+
     replans = "the current frame; re-plans every step"
     return {
         "act": Setting("act", "act", "ACT, 1 frame", replans, act, act_tiny, memoryless=True),
@@ -161,6 +174,15 @@ def make_settings(history: int) -> dict[str, Setting]:
             f"the last {history} frames; re-plans every step",
             diffusion(history),
             diffusion_tiny(history),
+        ),
+        "memory-gru": Setting(
+            "memory-gru",
+            "memory_gru",
+            "GRU, whole episode",
+            "every frame since the reset (a GRU's state); acts every step",
+            {"policy.type": "memory_gru"},
+            memory_tiny,
+            trainer="memory",
         ),
     }
 
@@ -215,3 +237,27 @@ def flag_diff(old: Mapping[str, str], new: Mapping[str, str]) -> str:
     """``key: old -> new`` for every key whose value differs."""
     keys = sorted(set(old) | set(new))
     return ", ".join(f"{k}: {old.get(k)} -> {new.get(k)}" for k in keys if old.get(k) != new.get(k))
+
+
+MEMORY_FLAGS = {
+    "dataset.root": "--data",
+    "policy.device": "--device",
+    "steps": "--steps",
+    "batch_size": "--batch-size",
+    "seed": "--seed",
+    "log_freq": "--log-every",
+}
+"""The flags of `train_flags` that baselines/memory's trainer takes, and its names for them
+(its batch is whole episodes; ``policy.KEY`` becomes ``--policy KEY=VALUE``)."""
+
+
+def memory_train_argv(flags: Mapping[str, str]) -> list[str]:
+    """``mikasa-memory-train``'s arguments for a memory setting's `train_flags` (computed with
+    the NPZ episodes as ``dataset.root``); lerobot-train's flags it has no use for are left out."""
+    argv: list[str] = []
+    for key, value in flags.items():
+        if key in MEMORY_FLAGS:
+            argv += [MEMORY_FLAGS[key], value]
+        elif key.startswith("policy.") and key not in {"policy.type", "policy.push_to_hub"}:
+            argv += ["--policy", f"{key.removeprefix('policy.')}={value}"]
+    return argv

@@ -41,6 +41,7 @@ from baseline_common import (
     write_json,
 )
 from baseline_eval import EvaluateStage
+from baseline_memory import MemoryTrainStage
 from baseline_settings import (
     Setting,
     dataset_name,
@@ -129,7 +130,7 @@ def parse_train_log(text: str, start_step: int, log_freq: int) -> dict[str, Any]
     }
 
 
-class Driver(EvaluateStage):
+class Driver(EvaluateStage, MemoryTrainStage):
     """The configured run's layout under ``--out``, its records and its units."""
 
     def __init__(self, args: argparse.Namespace) -> None:
@@ -380,8 +381,10 @@ class Driver(EvaluateStage):
 
     # ---------------------------------------------------------------- train
     def train_args(self, task: str, setting: Setting) -> dict[str, str]:
-        """lerobot-train's flags (key -> value) for ``setting`` on ``task``, overrides applied."""
-        return train_flags(self.a, task, setting, str(self.lerobot_dir(task)), self.device())
+        """lerobot-train's flags (key -> value) for ``setting`` on ``task``, overrides applied
+        (a memory setting's: the same keys, its dataset the NPZ episodes)."""
+        flags = train_flags(self.a, task, setting, str(self.lerobot_dir(task)), self.device())
+        return self.memory_train_args(task, setting, flags) if setting.trainer == "memory" else flags
 
     def check_train_record(self, task: str, setting: Setting) -> dict[str, str]:
         """The model-defining training flags; `UnitFailed` when the recorded training of
@@ -399,6 +402,8 @@ class Driver(EvaluateStage):
 
     def trained(self, task: str, setting: str) -> Path | None:
         """The final checkpoint's pretrained_model directory, if training finished."""
+        if self.settings[setting].trainer == "memory":
+            return self.memory_trained(task, setting)
         model = _last(self.train_dir(task, setting)) / "pretrained_model"
         return model if (model / "model.safetensors").is_file() else None
 
@@ -429,7 +434,10 @@ class Driver(EvaluateStage):
     def train(self, task: str, setting: Setting) -> None:
         """lerobot-train from scratch into a ``.partial`` directory; stopped (SIGTERM) at the
         time limit and resumed from its last checkpoint by the next call (the steps after that
-        checkpoint are lost); renamed into place when the last step is saved."""
+        checkpoint are lost); renamed into place when the last step is saved. A memory
+        setting trains with baselines/memory's trainer instead (`MemoryTrainStage`)."""
+        if setting.trainer == "memory":
+            return self.train_memory(task, setting)
         unit = f"train-{setting.name}"
         args = self.train_args(task, setting)
         model_key = self.check_train_record(task, setting)

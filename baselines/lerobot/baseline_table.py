@@ -120,6 +120,7 @@ def build_table(d: Driver) -> dict[str, Any]:
                 "policy_type": d.settings[s].policy_type,
                 "sees": d.settings[s].sees,
                 "memoryless": d.settings[s].memoryless,
+                "whole_episode": d.settings[s].trainer == "memory",
             }
             for s in policies
         },
@@ -152,6 +153,7 @@ def _headline(t: Mapping[str, Any]) -> list[str]:
     """The title and one sentence: where the memoryless and the history policies stand."""
     memoryless = [0, 0]  # (at or below chance, evaluated)
     history = [0, 0]  # (above chance, evaluated)
+    episode = [0, 0]  # (above chance, evaluated)
     for row in t["rows"]:
         for s, v in t["settings"].items():
             verdict = row["cells"][s]["vs_chance"]
@@ -161,14 +163,20 @@ def _headline(t: Mapping[str, Any]) -> list[str]:
                 memoryless[0] += verdict in ("at chance", "below")
                 memoryless[1] += 1
             else:
-                history[0] += verdict == "above"
-                history[1] += 1
+                tally = episode if v.get("whole_episode") else history
+                tally[0] += verdict == "above"
+                tally[1] += 1
     sentence = (
         f"**Policies that see one frame stay at or below chance on {memoryless[0]} of their "
         f"{memoryless[1]} task results"
     )
     if history[1]:
         sentence += f"; with a history of frames they rise above chance on {history[0]} of {history[1]}"
+    if episode[1]:
+        sentence += (
+            f"; a recurrent policy that keeps the whole episode is above chance on {episode[0]} "
+            f"of {episode[1]}"
+        )
     return ["# LeRobot baselines on MIKASA-Robo-VLA (trained from scratch)\n", sentence + ".**\n"]
 
 
@@ -187,7 +195,8 @@ def _results(t: Mapping[str, Any], cols: list[tuple[str, str]]) -> list[str]:
         "= rate [Wilson 95 % interval]. **chance**: what a policy without memory gets by guessing "
         "(`mikasa_bench.results.chance`; reasons below). Learned policies: LeRobot 0.4.4 policies trained "
         f"from scratch (no pretrained weights) on {t['episodes_per_task']} oracle demonstrations per "
-        f"task, {t['steps']} steps at batch {t['batch_size']} unless a row says otherwise. "
+        f"task, {t['steps']} steps at batch {t['batch_size']} unless a row says otherwise "
+        "(the GRU's batch is whole episodes: `mikasa-memory-train`, `baselines/memory`). "
         "*at chance* / *above* / *below*: where chance lies relative to the interval.\n",
         "| task | memory | chance | " + " | ".join(label for _, label in cols) + " |",
         "|---|---|---|" + "---|" * len(cols),
@@ -228,7 +237,13 @@ def _finding(t: Mapping[str, Any]) -> list[str]:
         for s, v in t["settings"].items():
             verdict = row["cells"][s]["vs_chance"]
             if verdict:
-                kind = "memoryless" if v["memoryless"] else "with history/chunks"
+                kind = (
+                    "memoryless"
+                    if v["memoryless"]
+                    else "whole episode"
+                    if v.get("whole_episode")
+                    else "with history/chunks"
+                )
                 verdicts.append(f"{v['label']} ({kind}) {verdict}")
                 if v["memoryless"]:
                     counts[verdict] = counts.get(verdict, 0) + 1
@@ -270,7 +285,8 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
             tr = row["train"].get(s)
             ev = row["cells"][s]["record"]
             if tr:
-                training = f"{tr['steps']} steps x {tr['batch_size']}"
+                unit = f" {tr['batch_unit']}" if tr.get("batch_unit") else ""
+                training = f"{tr['steps']} steps x {tr['batch_size']}{unit}"
                 wall = f"{_hms(tr['wall_s'])} ({tr['calls']})"
                 loss = f"{tr['final_loss']:.4f}" if tr.get("final_loss") is not None else "–"
                 device = tr.get("device") or "–"

@@ -86,12 +86,15 @@ def prepare_task(d: Driver, task: str, stages: set[str]) -> None:
     if stages & {"train", "eval"}:
         for s in settings:
             d.check_train_record(task, s)
-    need_data = "train" in stages and any(needs_training(d, task, s) for s in settings)
+    to_train = [s for s in settings if "train" in stages and needs_training(d, task, s)]
+    # lerobot-train reads the LeRobot dataset, the memory trainer the NPZ episodes.
+    need_lerobot = any(s.trainer != "memory" for s in to_train)
+    need_npz = len(to_train) > len([s for s in to_train if s.trainer != "memory"])
     # Collection is only needed for a dataset that is not converted yet; with "collect"
     # asked for explicitly it runs anyway (a no-op when the episodes are there).
-    if "collect" in stages or (need_data and d.converted(task) is None):
+    if "collect" in stages or (need_lerobot and d.converted(task) is None) or need_npz:
         d.collect(task)
-    if "convert" in stages or need_data:
+    if "convert" in stages or need_lerobot:
         d.convert(task)
     if "eval" in stages:
         for ref in d.a.references:
@@ -226,8 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
     csv(
         "--policies",
         DEFAULT_SETTINGS,
-        "comma-separated settings: act, act-chunk, diffusion, diffusion-hist "
-        "(default: act,diffusion,diffusion-hist)",
+        "comma-separated settings: act, act-chunk, diffusion, diffusion-hist, memory-gru "
+        "(default: act,diffusion,diffusion-hist,memory-gru)",
     )
     csv(
         "--references",

@@ -113,11 +113,15 @@ def import_lerobot() -> Any:
     try:
         import lerobot
         import lerobot.policies.factory  # noqa: F401
+        from lerobot.utils.import_utils import register_third_party_plugins
     except ImportError as exc:
         raise BenchError(
             f"LeRobot policies need lerobot 0.4.x and its runtime dependencies ({exc}); "
             f"{INSTALL_HINT}"
         ) from None
+    # Policies installed as LeRobot plugins (``lerobot_policy_*`` packages) register their
+    # config types on import, as under lerobot-train and lerobot-eval.
+    register_third_party_plugins()
     return lerobot
 
 

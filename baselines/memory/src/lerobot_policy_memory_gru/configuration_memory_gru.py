@@ -1,0 +1,104 @@
+"""Configuration of the recurrent memory policy (``--policy.type=memory_gru``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.configs.types import FeatureType, NormalizationMode
+from lerobot.optim.optimizers import AdamWConfig
+
+POLICY_TYPE = "memory_gru"
+
+
+@PreTrainedConfig.register_subclass(POLICY_TYPE)
+@dataclass
+class MemoryGRUConfig(PreTrainedConfig):
+    """A per-frame image encoder feeding a GRU that runs over the whole episode.
+
+    At every step the policy encodes each camera with its own small CNN, embeds the state and
+    the instruction, and feeds the concatenation to a GRU whose hidden state is carried from
+    the episode's reset to its end; a head maps the hidden state to the step's action. So the
+    action at step t depends on everything seen since the reset, not on a fixed window.
+
+    Training sees sequences: a batch holds ``(B, T, ...)`` observations and actions with
+    ``*_is_pad`` masks (lerobot's convention). Padding at the start (lerobot-train's windows
+    that reach before the episode's first frame) keeps the GRU at its reset state; padding at
+    the end (whole episodes of different lengths) is masked out of the loss.
+
+    ``history_window``: how many frames one lerobot-train sample holds (the observation and
+    action delta indices ``1 - history_window .. 0``). A window at least as long as the
+    longest training episode reaches back to the reset from every step, so training and
+    acting see the same history; `lerobot_policy_memory_gru.train` feeds whole episodes and
+    does not use it.
+    """
+
+    history_window: int = 64
+    n_action_steps: int = 1
+
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.MEAN_STD,
+            "ACTION": NormalizationMode.MIN_MAX,
+        }
+    )
+
+    # Per-camera encoder: three strided convolutions, then a linear layer.
+    vision_channels: tuple[int, ...] = (32, 64, 64)
+    vision_dim: int = 256
+    state_dim: int = 64
+    # Instruction: mean of hashed word embeddings (no tokenizer to download); 0 turns it off.
+    instruction_buckets: int = 1024
+    instruction_dim: int = 32
+    hidden_dim: int = 256
+    num_layers: int = 1
+    head_dim: int = 256
+    # Training-time augmentation: images shifted by up to this many pixels (replicate pad, crop).
+    random_shift_pixels: int = 4
+
+    optimizer_lr: float = 3e-4
+    optimizer_weight_decay: float = 1e-4
+    optimizer_grad_clip_norm: float = 10.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.history_window < 1:
+            raise ValueError(f"history_window must be >= 1, got {self.history_window}")
+        if self.n_action_steps != 1:
+            raise ValueError(
+                f"n_action_steps must be 1 (the policy acts on every frame), got {self.n_action_steps}"
+            )
+        if len(self.vision_channels) != 3:
+            raise ValueError(f"vision_channels needs 3 entries, got {self.vision_channels}")
+
+    @property
+    def observation_delta_indices(self) -> list[int]:
+        return list(range(1 - self.history_window, 1))
+
+    @property
+    def action_delta_indices(self) -> list[int]:
+        return list(range(1 - self.history_window, 1))
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None
+
+    def get_optimizer_preset(self) -> AdamWConfig:
+        return AdamWConfig(
+            lr=self.optimizer_lr,
+            weight_decay=self.optimizer_weight_decay,
+            grad_clip_norm=self.optimizer_grad_clip_norm,
+        )
+
+    def get_scheduler_preset(self) -> None:
+        return None
+
+    def validate_features(self) -> None:
+        if not self.image_features:
+            raise ValueError("memory_gru needs at least one camera (a VISUAL input feature)")
+        if self.action_feature is None:
+            raise ValueError("memory_gru needs an 'action' output feature")
+        for key, ft in self.image_features.items():
+            if ft.type is not FeatureType.VISUAL or len(ft.shape) != 3:
+                raise ValueError(f"camera {key}: expected a (C, H, W) VISUAL feature, got {ft}")

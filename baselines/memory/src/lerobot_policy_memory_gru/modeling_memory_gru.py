@@ -1,0 +1,207 @@
+"""The recurrent memory policy: per-frame CNN encoders, a GRU over the episode, an action head.
+
+Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
+
+* training, ``forward(batch)``: every camera ``(B, T, C, H, W)`` in [0, 1], the state
+  ``(B, T, S)`` and the actions ``(B, T, A)`` normalised by the preprocessor, ``action_is_pad``
+  ``(B, T)``, ``task`` (B instructions). Returns the L1 loss over the steps that are not
+  padding.
+* acting, ``select_action(batch)``: every camera ``(B, C, H, W)``, the state ``(B, S)``, ``task``;
+  one step of the GRU from the hidden state the previous call left (``reset()`` clears it at
+  an episode's start). Returns ``(B, A)``, normalised (the postprocessor undoes it).
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.constants import ACTION, OBS_STATE
+from torch import Tensor, nn
+
+from lerobot_policy_memory_gru.configuration_memory_gru import POLICY_TYPE, MemoryGRUConfig
+
+TASK_KEY = "task"
+PAD_SUFFIX = "_is_pad"
+
+
+def instruction_word_buckets(texts: Sequence[str], buckets: int) -> tuple[Tensor, Tensor]:
+    """The words of each instruction hashed into ``buckets`` (CRC-32: the same in every
+    process), as EmbeddingBag's flat ``(indices, offsets)``; an empty text is bucket 0."""
+    indices: list[int] = []
+    offsets: list[int] = []
+    for text in texts:
+        offsets.append(len(indices))
+        words = re.findall(r"[a-z0-9]+", str(text).lower()) or [""]
+        indices.extend(zlib.crc32(w.encode()) % buckets for w in words)
+    return torch.tensor(indices, dtype=torch.long), torch.tensor(offsets, dtype=torch.long)
+
+
+def random_shift(images: Tensor, pixels: int) -> Tensor:
+    """Each image shifted by up to ``pixels`` in x and y (edge pixels repeated), ``(N, C, H, W)``."""
+    n, _, h, w = images.shape
+    padded = F.pad(images, (pixels, pixels, pixels, pixels), mode="replicate")
+    dy = torch.randint(0, 2 * pixels + 1, (n,), device=images.device)
+    dx = torch.randint(0, 2 * pixels + 1, (n,), device=images.device)
+    rows = (torch.arange(h, device=images.device)[None] + dy[:, None])[:, :, None]  # (N, H, 1)
+    cols = (torch.arange(w, device=images.device)[None] + dx[:, None])[:, None, :]  # (N, 1, W)
+    batch = torch.arange(n, device=images.device)[:, None, None]
+    return padded.permute(0, 2, 3, 1)[batch, rows, cols].permute(0, 3, 1, 2)
+
+
+def leading_padding(pad: Tensor) -> Tensor:
+    """Per row of a ``(B, T)`` padding mask, how many steps at its start are padding."""
+    return torch.cumprod(pad.to(torch.long), dim=1).sum(dim=1)
+
+
+def shift_left(x: Tensor, lead: Tensor) -> Tensor:
+    """Row b of ``x`` (``(B, T, ...)``) moved ``lead[b]`` steps to the left (the tail repeats
+    the last step; the caller masks it)."""
+    b, t = x.shape[:2]
+    steps = (torch.arange(t, device=x.device)[None] + lead[:, None]).clamp(max=t - 1)
+    return x[torch.arange(b, device=x.device)[:, None], steps]
+
+
+class CameraEncoder(nn.Module):
+    """One camera's frame -> a feature vector: three strided convolutions, a linear layer."""
+
+    def __init__(self, shape: Sequence[int], channels: Sequence[int], out_dim: int) -> None:
+        super().__init__()
+        c, h, w = shape
+        c1, c2, c3 = channels
+        self.conv = nn.Sequential(
+            nn.Conv2d(c, c1, kernel_size=8, stride=4),
+            nn.ReLU(),
+            nn.Conv2d(c1, c2, kernel_size=4, stride=2),
+            nn.ReLU(),
+            nn.Conv2d(c2, c3, kernel_size=3, stride=2),
+            nn.ReLU(),
+            nn.Flatten(),
+        )
+        with torch.no_grad():
+            flat = self.conv(torch.zeros(1, c, h, w)).shape[1]
+        self.proj = nn.Sequential(nn.Linear(flat, out_dim), nn.LayerNorm(out_dim), nn.ReLU())
+
+    def forward(self, images: Tensor) -> Tensor:
+        return self.proj(self.conv(images - 0.5))
+
+
+class MemoryGRUPolicy(PreTrainedPolicy):
+    """CNN per camera + state + instruction -> GRU over the episode -> action (module docstring)."""
+
+    config_class = MemoryGRUConfig
+    name = POLICY_TYPE
+
+    def __init__(
+        self, config: MemoryGRUConfig, dataset_stats: dict | None = None, **kwargs
+    ) -> None:
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.camera_keys = list(config.image_features)
+        self.encoders = nn.ModuleDict(
+            {
+                key.replace(".", "_"): CameraEncoder(
+                    config.image_features[key].shape, config.vision_channels, config.vision_dim
+                )
+                for key in self.camera_keys
+            }
+        )
+        step_dim = config.vision_dim * len(self.camera_keys)
+        state = config.robot_state_feature
+        self.state_proj = None
+        if state is not None:
+            self.state_proj = nn.Sequential(nn.Linear(state.shape[0], config.state_dim), nn.ReLU())
+            step_dim += config.state_dim
+        self.instruction = None
+        if config.instruction_buckets > 0:
+            self.instruction = nn.EmbeddingBag(
+                config.instruction_buckets, config.instruction_dim, mode="mean"
+            )
+            step_dim += config.instruction_dim
+        self.gru = nn.GRU(step_dim, config.hidden_dim, config.num_layers, batch_first=True)
+        self.head = nn.Sequential(
+            nn.Linear(config.hidden_dim, config.head_dim),
+            nn.ReLU(),
+            nn.Linear(config.head_dim, config.action_feature.shape[0]),
+        )
+        self.reset()
+
+    # -------------------------------------------------------------- lerobot's interface
+    def get_optim_params(self) -> dict:
+        return self.parameters()
+
+    def reset(self) -> None:
+        """An episode starts: forget the hidden state."""
+        self._hidden: Tensor | None = None
+
+    def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
+        """The L1 loss of the predicted actions over a batch of sequences (module docstring)."""
+        actions = batch[ACTION]
+        if actions.ndim == 2:  # one target per sample: a sequence of length 1
+            batch = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
+            actions = batch[ACTION]
+        b, t = actions.shape[:2]
+        pad = batch.get(ACTION + PAD_SUFFIX)
+        pad = torch.zeros(b, t, dtype=torch.bool, device=actions.device) if pad is None else pad
+        # Start the GRU at each sequence's first real step: move leading padding to the end.
+        lead = leading_padding(pad)
+        if bool(lead.any()):
+            keys = [*self.camera_keys, OBS_STATE, ACTION]
+            batch = {**batch, **{k: shift_left(batch[k], lead) for k in keys if k in batch}}
+            pad = shift_left(pad, lead) | (
+                torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
+            )
+        hidden, _ = self.gru(self._step_inputs(batch, b, t))
+        predicted = self.head(hidden)
+        valid = (~pad).unsqueeze(-1).to(predicted.dtype)
+        error = (predicted - batch[ACTION]).abs() * valid
+        loss = error.sum() / (valid.sum() * predicted.shape[-1]).clamp(min=1.0)
+        return loss, {"l1_loss": loss.item()}
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """One step of the GRU: the action ``(B, 1, A)`` for this frame; advances the state."""
+        b = batch[self.camera_keys[0]].shape[0]
+        if self._hidden is not None and self._hidden.shape[1] != b:
+            raise ValueError(
+                f"memory_gru got a batch of {b} after batches of {self._hidden.shape[1]} in the "
+                "same episode; call reset() when the set of episodes changes"
+            )
+        step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
+        hidden, self._hidden = self.gru(self._step_inputs(step, b, 1), self._hidden)
+        return self.head(hidden)
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """The action ``(B, A)`` for this frame, given every frame since ``reset()``."""
+        return self.predict_action_chunk(batch)[:, 0]
+
+    # -------------------------------------------------------------- the per-step inputs
+    def _step_inputs(self, batch: dict[str, Tensor], b: int, t: int) -> Tensor:
+        """``(B, T, F)``: each camera's features, the state's and the instruction's."""
+        parts = []
+        for key in self.camera_keys:
+            images = batch[key].flatten(0, 1)
+            if self.training and self.config.random_shift_pixels > 0:
+                images = random_shift(images, self.config.random_shift_pixels)
+            parts.append(self.encoders[key.replace(".", "_")](images).view(b, t, -1))
+        if self.state_proj is not None:
+            parts.append(self.state_proj(batch[OBS_STATE]))
+        if self.instruction is not None:
+            texts = batch.get(TASK_KEY)
+            if texts is None:
+                raise KeyError(
+                    f"memory_gru with instruction_buckets > 0 needs the instruction in "
+                    f"batch[{TASK_KEY!r}]; got keys {sorted(batch)}"
+                )
+            texts = [texts] * b if isinstance(texts, str) else list(texts)
+            device = parts[0].device
+            indices, offsets = instruction_word_buckets(texts, self.config.instruction_buckets)
+            words = self.instruction(indices.to(device), offsets.to(device))
+            parts.append(words[:, None].expand(b, t, -1))
+        return torch.cat(parts, dim=-1)
