@@ -26,6 +26,7 @@
 #     for torch<2.11). Then `python -m mikasa_envs.setup_assets`, as scripts/setup.sh does:
 #     the envs use only the robot assets shipped in the mani-skill wheel plus the light
 #     meshes generated from them, so ManiSkill never prompts for or starts a download.
+#   * baselines/memory (the memory_gru LeRobot policy plugin), editable, with --no-deps.
 #   * a start-up hook that makes `import torchvision` work in every Python process of the
 #     environment (plain `lerobot-train`, `lerobot-eval`, `python -c "import torchvision"`):
 #     PyPI's torchvision 0.28.0 is a CUDA build whose `_C` ops library cannot load next to
@@ -78,6 +79,9 @@ ENV_PACKAGES=(
   "-e" "packages/mikasa-oracles"
   "-e" "packages/mikasa-bench"
 )
+# The memory baseline, a LeRobot policy plugin (baselines/memory/README.md): editable and
+# --no-deps, like mikasa-datasets (its lerobot requirement would drag in lerobot's pins).
+MEMORY_BASELINE=("-e" "baselines/memory")
 LEROBOT_RUNTIME=(
   "draccus==0.10.0"
   "gymnasium>=1.1.1,<2"
@@ -106,15 +110,16 @@ fi
 # changed (entry points, ...): five editable builds cost ~20 s, and the test suite runs this
 # script before each of its .venv-datasets test files.
 EDITABLE_DIRS=(packages/mikasa-datasets packages/mikasa-envs packages/mikasa-wrappers
-  packages/mikasa-oracles packages/mikasa-bench)
+  packages/mikasa-oracles packages/mikasa-bench baselines/memory)
 editable_stamp="$VENV/.mikasa-editable"
 editable_text="$root $(cat "${EDITABLE_DIRS[@]/%//pyproject.toml}" | sha256sum | cut -c1-16)"
 editables_current() {
   [ -f "$editable_stamp" ] && [ "$(cat "$editable_stamp")" = "$editable_text" ] &&
     "$VENV/bin/python" - "$root" <<'PY'
 import importlib.util, sys
-root = sys.argv[1] + "/packages/"
-names = ("mikasa_datasets", "mikasa_envs", "mikasa_wrappers", "mikasa_oracles", "mikasa_bench")
+root = sys.argv[1] + "/"
+names = ("mikasa_datasets", "mikasa_envs", "mikasa_wrappers", "mikasa_oracles", "mikasa_bench",
+         "lerobot_policy_memory_gru")
 specs = [importlib.util.find_spec(n) for n in names]  # locates, does not import
 sys.exit(0 if all(s is not None and (s.origin or "").startswith(root) for s in specs) else 1)
 PY
@@ -140,7 +145,8 @@ install_torchvision_hook() {
 
 if [ -x "$VENV/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$stamp_text" ]; then
   if ! editables_current; then
-    "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets "${ENV_PACKAGES[@]}"
+    "$VENV/bin/python" -m pip install -q --no-deps -e packages/mikasa-datasets "${ENV_PACKAGES[@]}" \
+      "${MEMORY_BASELINE[@]}"
     printf '%s' "$editable_text" > "$editable_stamp"
   fi
   install_torchvision_hook
@@ -173,6 +179,7 @@ t1=$SECONDS
 "$VENV/bin/python" -m pip install -q "${PINS[@]}" "${LEROBOT_RUNTIME[@]}" "${ENV_PACKAGES[@]}" \
   2> >(grep -v -e "is ignored: it is neither" -e "^lerobot [0-9.]* requires " \
     -e "^ERROR: pip's dependency resolver does not currently take" >&2)
+"$VENV/bin/python" -m pip install -q --no-deps "${MEMORY_BASELINE[@]}"
 # The light robot meshes, generated from the mani-skill wheel's own assets (no download).
 "$VENV/bin/python" -m mikasa_envs.setup_assets >/dev/null
 echo "[datasets-env] envs + lerobot policy/eval runtime: $((SECONDS - t1)) s"

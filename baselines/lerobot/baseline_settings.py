@@ -178,7 +178,7 @@ def make_settings(history: int) -> dict[str, Setting]:
         "memory-gru": Setting(
             "memory-gru",
             "memory_gru",
-            "GRU, whole episode",
+            "GRU memory",
             "every frame since the reset (a GRU's state); acts every step",
             {"policy.type": "memory_gru"},
             memory_tiny,

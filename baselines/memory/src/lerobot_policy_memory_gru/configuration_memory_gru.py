@@ -53,7 +53,13 @@ class MemoryGRUConfig(PreTrainedConfig):
     instruction_dim: int = 32
     hidden_dim: int = 256
     num_layers: int = 1
+    # Each camera's grid of local features read by attention queried with the GRU's state
+    # (what the memory looks for, and where it is); 0 turns it off.
+    readout_dim: int = 64
     head_dim: int = 256
+    # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
+    # that the steps where the demonstrator changes course count (0: a plain mean).
+    keyframe_weight: float = 10.0
     # Training-time augmentation: images shifted by up to this many pixels (replicate pad, crop).
     random_shift_pixels: int = 4
 

@@ -5,7 +5,8 @@ Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
 * training, ``forward(batch)``: every camera ``(B, T, C, H, W)`` in [0, 1], the state
   ``(B, T, S)`` and the actions ``(B, T, A)`` normalised by the preprocessor, ``action_is_pad``
   ``(B, T)``, ``task`` (B instructions). Returns the L1 loss over the steps that are not
-  padding.
+  padding, each step weighted by how much the demonstrator's action changes there
+  (`keyframe_weights`).
 * acting, ``select_action(batch)``: every camera ``(B, C, H, W)``, the state ``(B, S)``, ``task``;
   one step of the GRU from the hidden state the previous call left (``reset()`` clears it at
   an episode's start). Returns ``(B, A)``, normalised (the postprocessor undoes it).
@@ -66,32 +67,84 @@ def shift_left(x: Tensor, lead: Tensor) -> Tensor:
     return x[torch.arange(b, device=x.device)[:, None], steps]
 
 
+def keyframe_weights(actions: Tensor, valid: Tensor, strength: float) -> Tensor:
+    """Per step ``1 + strength * |a_t - a_(t-1)|`` (mean over the action's dimensions; 0 at
+    an episode's first step), ``(B, T)``.
+
+    With its own history in view, an imitation policy can copy what it just did instead of
+    deciding (after the first step towards a cube, the arm's motion tells which cube), and
+    the few steps where the demonstrator changes course, where memory decides, weigh
+    little in a plain average: "copycat" behaviour. Weighting the steps by how much the
+    action changes puts the loss where the decisions are (Wen et al., "Keyframe-Focused
+    Visual Imitation Learning", ICML 2021).
+    """
+    if strength <= 0:
+        return torch.ones_like(valid)
+    change = (actions[:, 1:] - actions[:, :-1]).abs().mean(dim=-1) * valid[:, 1:] * valid[:, :-1]
+    return 1.0 + strength * F.pad(change, (1, 0))
+
+
 class CameraEncoder(nn.Module):
-    """One camera's frame -> a feature vector: three strided convolutions, a linear layer."""
+    """One camera's frame -> a global feature vector and a grid of local features.
+
+    Two strided convolutions give the grid (each cell with its x, y in [-1, 1] appended, so
+    that what is read from a cell says where it is); a third convolution and a linear layer
+    give the global vector.
+    """
 
     def __init__(self, shape: Sequence[int], channels: Sequence[int], out_dim: int) -> None:
         super().__init__()
         c, h, w = shape
         c1, c2, c3 = channels
-        self.conv = nn.Sequential(
+        self.trunk = nn.Sequential(
             nn.Conv2d(c, c1, kernel_size=8, stride=4),
             nn.ReLU(),
             nn.Conv2d(c1, c2, kernel_size=4, stride=2),
             nn.ReLU(),
-            nn.Conv2d(c2, c3, kernel_size=3, stride=2),
-            nn.ReLU(),
-            nn.Flatten(),
+        )
+        self.top = nn.Sequential(
+            nn.Conv2d(c2, c3, kernel_size=3, stride=2), nn.ReLU(), nn.Flatten()
         )
         with torch.no_grad():
-            flat = self.conv(torch.zeros(1, c, h, w)).shape[1]
+            grid = self.trunk(torch.zeros(1, c, h, w))
+            flat = self.top(grid).shape[1]
+        gh, gw = grid.shape[2:]
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, gh), torch.linspace(-1, 1, gw), indexing="ij")
+        self.register_buffer(
+            "coords", torch.stack([xs, ys]).flatten(1).T.contiguous(), persistent=False
+        )
+        self.cell_dim = c2 + 2
         self.proj = nn.Sequential(nn.Linear(flat, out_dim), nn.LayerNorm(out_dim), nn.ReLU())
 
-    def forward(self, images: Tensor) -> Tensor:
-        return self.proj(self.conv(images - 0.5))
+    def forward(self, images: Tensor) -> tuple[Tensor, Tensor]:
+        """``(N, C, H, W)`` -> global ``(N, out_dim)``, cells ``(N, cells, channels + 2)``."""
+        grid = self.trunk(images - 0.5)
+        cells = grid.flatten(2).transpose(1, 2)
+        coords = self.coords.expand(cells.shape[0], -1, -1)
+        return self.proj(self.top(grid)), torch.cat([cells, coords], dim=-1)
+
+
+class MemoryReadout(nn.Module):
+    """Attention over one camera's grid, queried by the GRU's state: the memory says what to
+    look for (the remembered colour, the mug that hid the ball), the cells that match it give
+    their features and their place."""
+
+    def __init__(self, cell_dim: int, hidden_dim: int, dim: int) -> None:
+        super().__init__()
+        self.query = nn.Linear(hidden_dim, dim)
+        self.key = nn.Linear(cell_dim, dim)
+        self.value = nn.Linear(cell_dim, dim)
+        self.scale = dim**-0.5
+
+    def forward(self, hidden: Tensor, cells: Tensor) -> Tensor:
+        """``hidden (N, hidden_dim)``, ``cells (N, K, cell_dim)`` -> ``(N, dim)``."""
+        scores = torch.einsum("nd,nkd->nk", self.query(hidden), self.key(cells)) * self.scale
+        return torch.einsum("nk,nkd->nd", scores.softmax(dim=-1), self.value(cells))
 
 
 class MemoryGRUPolicy(PreTrainedPolicy):
-    """CNN per camera + state + instruction -> GRU over the episode -> action (module docstring)."""
+    """CNN per camera + state + instruction -> GRU over the episode -> action, with each
+    camera's grid read by the GRU's state (module docstring)."""
 
     config_class = MemoryGRUConfig
     name = POLICY_TYPE
@@ -103,12 +156,13 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         config.validate_features()
         self.config = config
         self.camera_keys = list(config.image_features)
+        names = [key.replace(".", "_") for key in self.camera_keys]
         self.encoders = nn.ModuleDict(
             {
-                key.replace(".", "_"): CameraEncoder(
+                name: CameraEncoder(
                     config.image_features[key].shape, config.vision_channels, config.vision_dim
                 )
-                for key in self.camera_keys
+                for name, key in zip(names, self.camera_keys, strict=True)
             }
         )
         step_dim = config.vision_dim * len(self.camera_keys)
@@ -124,8 +178,19 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             )
             step_dim += config.instruction_dim
         self.gru = nn.GRU(step_dim, config.hidden_dim, config.num_layers, batch_first=True)
+        self.readouts = nn.ModuleDict(
+            {
+                name: MemoryReadout(
+                    self.encoders[name].cell_dim, config.hidden_dim, config.readout_dim
+                )
+                for name in names
+            }
+            if config.readout_dim > 0
+            else {}
+        )
+        head_in = config.hidden_dim + config.readout_dim * len(self.readouts)
         self.head = nn.Sequential(
-            nn.Linear(config.hidden_dim, config.head_dim),
+            nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
             nn.Linear(config.head_dim, config.action_feature.shape[0]),
         )
@@ -156,12 +221,13 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             pad = shift_left(pad, lead) | (
                 torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
             )
-        hidden, _ = self.gru(self._step_inputs(batch, b, t))
-        predicted = self.head(hidden)
-        valid = (~pad).unsqueeze(-1).to(predicted.dtype)
-        error = (predicted - batch[ACTION]).abs() * valid
-        loss = error.sum() / (valid.sum() * predicted.shape[-1]).clamp(min=1.0)
-        return loss, {"l1_loss": loss.item()}
+        predicted, _ = self.actions(batch, b, t)
+        valid = (~pad).to(predicted.dtype)
+        error = (predicted - batch[ACTION]).abs().mean(dim=-1) * valid
+        weight = valid * keyframe_weights(batch[ACTION], valid, self.config.keyframe_weight)
+        loss = (error * weight).sum() / weight.sum().clamp(min=1e-6)
+        l1 = error.sum() / valid.sum().clamp(min=1.0)
+        return loss, {"l1_loss": l1.item()}
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -173,35 +239,51 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 "same episode; call reset() when the set of episodes changes"
             )
         step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
-        hidden, self._hidden = self.gru(self._step_inputs(step, b, 1), self._hidden)
-        return self.head(hidden)
+        predicted, self._hidden = self.actions(step, b, 1, self._hidden)
+        return predicted
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         """The action ``(B, A)`` for this frame, given every frame since ``reset()``."""
         return self.predict_action_chunk(batch)[:, 0]
 
-    # -------------------------------------------------------------- the per-step inputs
-    def _step_inputs(self, batch: dict[str, Tensor], b: int, t: int) -> Tensor:
-        """``(B, T, F)``: each camera's features, the state's and the instruction's."""
-        parts = []
+    # -------------------------------------------------------------- the network
+    def actions(
+        self, batch: dict[str, Tensor], b: int, t: int, hidden: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """The actions ``(B, T, A)`` for ``T`` steps that follow the GRU state ``hidden``
+        (None: an episode's start), and the state after them."""
+        parts, cells = [], []
         for key in self.camera_keys:
             images = batch[key].flatten(0, 1)
             if self.training and self.config.random_shift_pixels > 0:
                 images = random_shift(images, self.config.random_shift_pixels)
-            parts.append(self.encoders[key.replace(".", "_")](images).view(b, t, -1))
+            vector, grid = self.encoders[key.replace(".", "_")](images)
+            parts.append(vector.view(b, t, -1))
+            cells.append(grid)
         if self.state_proj is not None:
             parts.append(self.state_proj(batch[OBS_STATE]))
         if self.instruction is not None:
-            texts = batch.get(TASK_KEY)
-            if texts is None:
-                raise KeyError(
-                    f"memory_gru with instruction_buckets > 0 needs the instruction in "
-                    f"batch[{TASK_KEY!r}]; got keys {sorted(batch)}"
-                )
-            texts = [texts] * b if isinstance(texts, str) else list(texts)
-            device = parts[0].device
-            indices, offsets = instruction_word_buckets(texts, self.config.instruction_buckets)
-            words = self.instruction(indices.to(device), offsets.to(device))
-            parts.append(words[:, None].expand(b, t, -1))
-        return torch.cat(parts, dim=-1)
+            parts.append(self._instruction(batch, b, t, parts[0].device))
+        memory, hidden = self.gru(torch.cat(parts, dim=-1), hidden)
+        read = [memory]
+        for key, grid in zip(self.camera_keys, cells, strict=True):
+            readout = self.readouts[key.replace(".", "_")] if self.readouts else None
+            if readout is not None:
+                read.append(readout(memory.flatten(0, 1), grid).view(b, t, -1))
+        return self.head(torch.cat(read, dim=-1)), hidden
+
+    def _instruction(
+        self, batch: dict[str, Tensor], b: int, t: int, device: torch.device
+    ) -> Tensor:
+        """``(B, T, instruction_dim)``: the mean of the instruction's hashed word embeddings."""
+        texts = batch.get(TASK_KEY)
+        if texts is None:
+            raise KeyError(
+                f"memory_gru with instruction_buckets > 0 needs the instruction in "
+                f"batch[{TASK_KEY!r}]; got keys {sorted(batch)}"
+            )
+        texts = [texts] * b if isinstance(texts, str) else list(texts)
+        indices, offsets = instruction_word_buckets(texts, self.config.instruction_buckets)
+        words = self.instruction(indices.to(device), offsets.to(device))
+        return words[:, None].expand(b, t, -1)

@@ -116,15 +116,16 @@ def load_bank(paths: list[str], device: torch.device, max_episodes: int | None) 
     """The episodes of every dataset in ``paths`` (at most ``max_episodes`` from each)."""
     from mikasa_datasets.loaders import iter_episodes
 
-    episodes = []
+    episodes: list[dict[str, Any]] = []
     for path in paths:
         if not Path(path).exists():
-            raise FileNotFoundError(f"--data {path}: no such dataset directory")
-        for k, episode in enumerate(iter_episodes(path)):
-            if max_episodes is not None and k >= max_episodes:
+            raise SystemExit(f"--data {path}: no such dataset directory")
+        before = len(episodes)
+        for episode in iter_episodes(path):
+            if max_episodes is not None and len(episodes) - before >= max_episodes:
                 break
             episodes.append(episode)
-        print(f"[memory-train] {path}: {k + 1 if episodes else 0} episodes", flush=True)
+        print(f"[memory-train] {path}: {len(episodes) - before} episodes", flush=True)
     return EpisodeBank(episodes, device)
 
 
