@@ -125,6 +125,8 @@ class MemoryTrainStage:
                 "steps": int(args["steps"]),
                 "batch_size": int(args["batch_size"]),
                 "batch_unit": "episodes",
+                "episodes": p.get("episodes"),
+                "frames": p.get("frames"),
                 "wall_s": calls_wall_s(calls),
                 "steps_per_s": p.get("steps_per_s"),
                 "calls": len(calls),
