@@ -41,8 +41,9 @@ class MemoryTrainStage:
         return model if (model / "model.safetensors").is_file() else None
 
     def memory_train_args(self, task: str, setting: Setting, flags: dict[str, str]) -> dict:
-        """`train_flags` for the memory trainer: the NPZ episodes are its dataset."""
-        return {**flags, "dataset.root": str(self.npz_dir(task))}
+        """`train_flags` for the memory trainer: the first ``--episodes`` NPZ episodes are its
+        dataset."""
+        return {**flags, "dataset.root": str(self.npz_dir(task)), "episodes": str(self.a.episodes)}
 
     def train_memory(self, task: str, setting: Setting) -> None:
         """``mikasa-memory-train`` into a ``.partial`` directory, resumed by the next call when

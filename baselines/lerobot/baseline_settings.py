@@ -241,6 +241,7 @@ def flag_diff(old: Mapping[str, str], new: Mapping[str, str]) -> str:
 
 MEMORY_FLAGS = {
     "dataset.root": "--data",
+    "episodes": "--max-episodes",
     "policy.device": "--device",
     "steps": "--steps",
     "batch_size": "--batch-size",
