@@ -20,7 +20,8 @@ common=(--policies memory-gru --references "" --stages collect,train,eval,table 
 pids=()
 for tasks in RememberColor3-VLA-v0,ShellGameTouch-VLA-v0 BunchOfColors3-VLA-v0,InterceptSlow-VLA-v0 \
   BlinkCountButtonPressEasy-VLA-v0,TakeItBack-VLA-v0; do
-  python3 baselines/lerobot/run_baselines.py --tasks "$tasks" "${common[@]}" \
+  episodes=200; [ "$tasks" = "${tasks#RememberColor3}" ] || episodes=${EPISODES_FIRST:-200}
+  python3 baselines/lerobot/run_baselines.py --tasks "$tasks" "${common[@]}" --episodes "$episodes" \
     --doc "/tmp/lrb/BASELINES-${tasks%%-*}.md" > "/tmp/lrb-${tasks%%-*}.log" 2>&1 &
   pids+=($!)
 done

@@ -14,6 +14,7 @@ Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
 
 from __future__ import annotations
 
+import copy
 import re
 import zlib
 from collections.abc import Sequence
@@ -197,6 +198,14 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         self.reset()
 
     # -------------------------------------------------------------- lerobot's interface
+    def _save_pretrained(self, save_directory) -> None:
+        # On a GPU, cuDNN keeps the GRU's weights as views of one flat buffer, which
+        # safetensors refuses to save: save a CPU copy instead.
+        if any(p.is_cuda for p in self.parameters()):
+            copy.deepcopy(self).to("cpu")._save_pretrained(save_directory)
+            return
+        super()._save_pretrained(save_directory)
+
     def get_optim_params(self) -> dict:
         return self.parameters()
 
