@@ -284,6 +284,9 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
         for s in settings:
             tr = row["train"].get(s)
             ev = row["cells"][s]["record"]
+            # The memory trainer reads NPZ episodes, not the converted dataset: its own count.
+            own_data = tr and tr.get("episodes")
+            data_s = f"{tr['episodes']} / {tr['frames']} / NPZ" if own_data else data
             if tr:
                 unit = f" {tr['batch_unit']}" if tr.get("batch_unit") else ""
                 training = f"{tr['steps']} steps x {tr['batch_size']}{unit}"
@@ -300,7 +303,7 @@ def _runs(t: Mapping[str, Any]) -> list[str]:
                     how += f"; {ev['calls']} calls"
                 evw = f"{_hms(ev.get('wall_s'))} ({how})"
             out.append(
-                f"| {row['task']} | {settings[s]['label']} | {data} | {training} | {wall} | "
+                f"| {row['task']} | {settings[s]['label']} | {data_s} | {training} | {wall} | "
                 f"{rate} | {device} | {loss} | {evw} |"
             )
     out += [

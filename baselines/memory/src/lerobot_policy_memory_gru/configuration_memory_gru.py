@@ -48,6 +48,9 @@ class MemoryGRUConfig(PreTrainedConfig):
     vision_channels: tuple[int, ...] = (32, 64, 64)
     vision_dim: int = 256
     state_dim: int = 64
+    # Whether the GRU sees the robot's state. Without it, where the arm is heading has to be
+    # read from the cameras, so the state cannot stand in for the memory (copycat).
+    use_state: bool = True
     # Instruction: mean of hashed word embeddings (no tokenizer to download); 0 turns it off.
     instruction_buckets: int = 1024
     instruction_dim: int = 32

@@ -169,7 +169,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         step_dim = config.vision_dim * len(self.camera_keys)
         state = config.robot_state_feature
         self.state_proj = None
-        if state is not None:
+        if state is not None and config.use_state:
             self.state_proj = nn.Sequential(nn.Linear(state.shape[0], config.state_dim), nn.ReLU())
             step_dim += config.state_dim
         self.instruction = None
