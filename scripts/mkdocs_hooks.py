@@ -28,6 +28,7 @@ EMBEDDED: dict[str, str] = {
     "packages/mikasa-envs/DEVIATIONS.md": "deviations/mikasa-envs.md",
     "legacy/rl/DEVIATIONS.md": "deviations/mikasa-robo-rl.md",
     "legacy/rl/baselines/RESULTS.md": "results/ppo.md",
+    "baselines/memory/README.md": "results/memory-baseline.md",
 }
 
 # [text](target) and ![alt](target); targets without spaces, optionally with a #fragment.

@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # The memory baseline's six tasks on an offline GPU machine, as three drivers side by side
 # (two tasks each), after the simulator and lerobot calls of
-# docs/lab-notes/2026-11-26-lerobot-baselines-gpu-runs.md:
+# docs/lab-notes/2026-11-26-lerobot-baselines-gpu-runs.md (how it ran:
+# docs/lab-notes/2026-12-07-memory-baseline-runs.md):
 #
 #   source docs/lab-notes/lerobot-baselines/gpu_bundle.sh env && \
 #     bash docs/lab-notes/memory-baseline/gpu_drivers.sh LIMIT_S [DRIVER_ARGS...]
 #
 # installs baselines/memory into the simulator's site, runs the drivers on /tmp/lrb with
-# --time-limit LIMIT_S (run it again to go on: the drivers resume), then writes the table and
+# --time-limit LIMIT_S (EPISODES_FIRST: the first driver's --episodes, default 200) (run it again to go on: the drivers resume), then writes the table and
 # packs the records into $OUT/pack.tar.gz, with each shipped task's checkpoint as
 # $OUT/<task>.tar.
 set -u
