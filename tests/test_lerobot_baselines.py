@@ -276,6 +276,25 @@ else:
         # 5) other training arguments are refused, not silently mixed with the records.
         assert _driver(out, "--steps", "7", "--stages", "train,eval") == rb.EXIT_FAILED
 
+    def test_memory_setting_trains_from_npz(tmp_path: Path) -> None:
+        """``memory-gru``: trained from the collected NPZ episodes (no LeRobot dataset is
+        made), evaluated as a LeRobot policy directory, shown with its own data size; its
+        trainer's stop and exact resume are tested in tests/test_memory_policy.py."""
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        out = tmp_path / "run"
+        records = out / "records" / TASK
+        memory = ["--policies", "memory-gru", "--references", "", "--stages",
+                  "collect,train,eval,table", "--batch-size", "2"]  # fmt: skip
+        assert _driver(out, *memory) == rb.EXIT_OK
+        assert not (out / "data" / "data_lerobot").exists()
+        train = json.loads((records / "train-memory-gru.json").read_text())
+        assert train["steps"] == 6 and train["episodes"] == 3 and train["batch_unit"] == "episodes"
+        assert "lerobot_policy_memory_gru.train" in train["command"]
+        ev = json.loads((records / "eval-memory-gru.json").read_text())
+        assert ev["n_episodes"] == 2 and ev["model"].startswith("lerobot-memory_gru")
+        md = (out / "BASELINES.md").read_text()
+        assert f"| 3 / {train['frames']} / NPZ | 6 steps x 2 episodes |" in md
+
     def test_drivers_side_by_side_share_the_settings(tmp_path: Path) -> None:
         """Two drivers on one task: one prepares the data while the other waits, then each
         setting is trained exactly once (by whichever driver took its lock)."""

@@ -16,7 +16,6 @@ from typing import Any
 from baseline_common import (
     TimeUp,
     UnitFailed,
-    calls_wall_s,
     display,
     log,
     read_json,
@@ -115,23 +114,16 @@ class MemoryTrainStage:
         if not done:
             raise self.fail(task, unit, f"mikasa-memory-train exit {res.rc}")
         part.rename(final)
-        rec = self.save_record(
+        self.finish_training(
             task,
-            unit,
+            setting,
+            args,
+            calls,
             {
-                "setting": setting.name,
-                "label": setting.label,
-                "policy_type": setting.policy_type,
-                "sees": setting.sees,
-                "steps": int(args["steps"]),
-                "batch_size": int(args["batch_size"]),
                 "batch_unit": "episodes",
                 "episodes": p.get("episodes"),
                 "frames": p.get("frames"),
-                "wall_s": calls_wall_s(calls),
                 "steps_per_s": p.get("steps_per_s"),
-                "calls": len(calls),
-                "call_log": calls,
                 "device": p.get("device"),
                 "num_params": p.get("parameters"),
                 "final_loss": p.get("final_loss"),
@@ -140,8 +132,4 @@ class MemoryTrainStage:
                 "command": display(base),
                 "resume_command": display([*base, "--resume"]),
             },
-        )
-        log(
-            f"{task}: trained {setting.name}: {rec['steps']} steps in {rec['wall_s']:.0f} s "
-            f"({rec['calls']} call(s)), loss {rec['final_loss']}"
         )

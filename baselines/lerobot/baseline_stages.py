@@ -530,9 +530,36 @@ class Driver(EvaluateStage, MemoryTrainStage):
         if not done:
             raise self.fail(task, unit, f"lerobot-train exit {res.rc}")
         part.rename(final)
+        self.finish_training(
+            task,
+            setting,
+            args,
+            calls,
+            {
+                "steps_per_s": _rate(calls),
+                "device": entry["device"],
+                "num_params": p["num_params"],
+                "final_loss": p["loss"],
+                "checkpoint": rel(_last(final) / "pretrained_model"),
+                "model_args": model_key,
+                "command": display(first),
+                "resume_command": display(self._resume_argv(final)),
+            },
+        )
+
+    def finish_training(
+        self,
+        task: str,
+        setting: Setting,
+        args: Mapping[str, str],
+        calls: list[dict],
+        fields: Mapping[str, Any],
+    ) -> None:
+        """Save a finished training's record (what every setting's record holds, then
+        ``fields``: rate, device, loss, checkpoint, commands) and log it."""
         rec = self.save_record(
             task,
-            unit,
+            f"train-{setting.name}",
             {
                 "setting": setting.name,
                 "label": setting.label,
@@ -541,16 +568,9 @@ class Driver(EvaluateStage, MemoryTrainStage):
                 "steps": int(args["steps"]),
                 "batch_size": int(args["batch_size"]),
                 "wall_s": calls_wall_s(calls),
-                "steps_per_s": _rate(calls),
                 "calls": len(calls),
                 "call_log": calls,
-                "device": entry["device"],
-                "num_params": p["num_params"],
-                "final_loss": p["loss"],
-                "checkpoint": rel(_last(final) / "pretrained_model"),
-                "model_args": model_key,
-                "command": display(first),
-                "resume_command": display(self._resume_argv(final)),
+                **fields,
             },
         )
         log(
