@@ -18,8 +18,10 @@ class MemoryGRUConfig(PreTrainedConfig):
 
     At every step the policy encodes each camera with its own small CNN, embeds the state and
     the instruction, and feeds the concatenation to a GRU whose hidden state is carried from
-    the episode's reset to its end; a head maps the hidden state to the step's action. So the
-    action at step t depends on everything seen since the reset, not on a fixed window.
+    the episode's reset to its end; the hidden state also queries each camera's grid of local
+    features (attention over cells that carry their image coordinates), and a head maps both
+    to the step's action. So the action at step t depends on everything seen since the reset,
+    not on a fixed window.
 
     Training sees sequences: a batch holds ``(B, T, ...)`` observations and actions with
     ``*_is_pad`` masks (lerobot's convention). Padding at the start (lerobot-train's windows

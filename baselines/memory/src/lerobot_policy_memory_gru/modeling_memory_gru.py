@@ -1,4 +1,5 @@
-"""The recurrent memory policy: per-frame CNN encoders, a GRU over the episode, an action head.
+"""The recurrent memory policy: per-frame CNN encoders, a GRU over the episode, a readout of
+each camera's grid queried by the GRU's state, an action head.
 
 Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
 
