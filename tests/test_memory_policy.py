@@ -88,10 +88,12 @@ else:
         register_third_party_plugins()
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
-    def test_acting_step_by_step_equals_the_training_pass() -> None:
+    @pytest.mark.parametrize("attention", [0, 8], ids=["gru", "gru+episode-attention"])
+    def test_acting_step_by_step_equals_the_training_pass(attention: int) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
-        training pass predicts for the whole sequence: the GRU sees the same history."""
-        policy = tiny_policy()
+        training pass predicts for the whole sequence: the GRU (and the attention over the
+        episode's earlier steps) see the same history."""
+        policy = tiny_policy(episode_attention_dim=attention)
         batch = sequence_batch(2, 6)
         with torch.no_grad():
             whole = policy.actions(batch, 2, 6)[0]

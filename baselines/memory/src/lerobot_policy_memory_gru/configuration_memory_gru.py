@@ -61,6 +61,10 @@ class MemoryGRUConfig(PreTrainedConfig):
     # Each camera's grid of local features read by attention queried with the GRU's state
     # (what the memory looks for, and where it is); 0 turns it off.
     readout_dim: int = 64
+    # Attention from each step over every earlier step's inputs, so that what the cue showed
+    # can be looked up when the decision comes rather than carried through the delay by the
+    # GRU alone; 0 turns it off.
+    episode_attention_dim: int = 0
     head_dim: int = 256
     # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
     # that the steps where the demonstrator changes course count (0: a plain mean).

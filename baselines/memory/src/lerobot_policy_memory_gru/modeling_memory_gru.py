@@ -144,6 +144,39 @@ class MemoryReadout(nn.Module):
         return torch.einsum("nk,nkd->nd", scores.softmax(dim=-1), self.value(cells))
 
 
+class EpisodeAttention(nn.Module):
+    """Causal attention from each step over the inputs of every step so far in the episode.
+
+    A GRU has to carry what the cue showed through the delay in its state, and nothing in the
+    loss before the decision asks it to; this looks the cue up again when the decision comes.
+    ``keys``/``values`` of earlier steps are the caller's to keep while acting.
+    """
+
+    def __init__(self, step_dim: int, hidden_dim: int, dim: int) -> None:
+        super().__init__()
+        self.query = nn.Linear(hidden_dim, dim)
+        self.key = nn.Linear(step_dim, dim)
+        self.value = nn.Linear(step_dim, dim)
+        self.scale = dim**-0.5
+
+    def forward(
+        self, hidden: Tensor, steps: Tensor, past: tuple[Tensor, Tensor] | None = None
+    ) -> tuple[Tensor, tuple[Tensor, Tensor]]:
+        """``hidden (B, T, hidden_dim)``, ``steps (B, T, step_dim)`` and the keys/values of the
+        episode's earlier steps -> ``(B, T, dim)`` and the keys/values including these steps."""
+        keys, values = self.key(steps), self.value(steps)
+        if past is not None:
+            keys, values = torch.cat([past[0], keys], 1), torch.cat([past[1], values], 1)
+        t, n = steps.shape[1], keys.shape[1]
+        scores = torch.einsum("btd,bnd->btn", self.query(hidden), keys) * self.scale
+        later = (
+            torch.arange(n, device=steps.device)[None]
+            > torch.arange(n - t, n, device=steps.device)[:, None]
+        )
+        scores = scores.masked_fill(later, float("-inf"))
+        return torch.einsum("btn,bnd->btd", scores.softmax(dim=-1), values), (keys, values)
+
+
 class MemoryGRUPolicy(PreTrainedPolicy):
     """CNN per camera + state + instruction -> GRU over the episode -> action, with each
     camera's grid read by the GRU's state (module docstring)."""
@@ -190,7 +223,13 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             if config.readout_dim > 0
             else {}
         )
+        self.episode_attention = (
+            EpisodeAttention(step_dim, config.hidden_dim, config.episode_attention_dim)
+            if config.episode_attention_dim > 0
+            else None
+        )
         head_in = config.hidden_dim + config.readout_dim * len(self.readouts)
+        head_in += config.episode_attention_dim
         self.head = nn.Sequential(
             nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
@@ -213,6 +252,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
     def reset(self) -> None:
         """An episode starts: forget the hidden state."""
         self._hidden: Tensor | None = None
+        self._past: tuple[Tensor, Tensor] | None = None
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         """The L1 loss of the predicted actions over a batch of sequences (module docstring)."""
@@ -249,7 +289,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 "same episode; call reset() when the set of episodes changes"
             )
         step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
-        predicted, self._hidden = self.actions(step, b, 1, self._hidden)
+        predicted, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
         return predicted
 
     @torch.no_grad()
@@ -259,10 +299,16 @@ class MemoryGRUPolicy(PreTrainedPolicy):
 
     # -------------------------------------------------------------- the network
     def actions(
-        self, batch: dict[str, Tensor], b: int, t: int, hidden: Tensor | None = None
-    ) -> tuple[Tensor, Tensor]:
-        """The actions ``(B, T, A)`` for ``T`` steps that follow the GRU state ``hidden``
-        (None: an episode's start), and the state after them."""
+        self,
+        batch: dict[str, Tensor],
+        b: int,
+        t: int,
+        hidden: Tensor | None = None,
+        past: tuple[Tensor, Tensor] | None = None,
+    ) -> tuple[Tensor, tuple[Tensor, tuple[Tensor, Tensor] | None]]:
+        """The actions ``(B, T, A)`` for ``T`` steps that follow the GRU state ``hidden`` and
+        the episode attention's keys/values ``past`` (None: an episode's start), and both
+        after them."""
         parts, cells = [], []
         for key in self.camera_keys:
             images = batch[key].flatten(0, 1)
@@ -275,13 +321,17 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             parts.append(self.state_proj(batch[OBS_STATE]))
         if self.instruction is not None:
             parts.append(self._instruction(batch, b, t, parts[0].device))
-        memory, hidden = self.gru(torch.cat(parts, dim=-1), hidden)
+        steps = torch.cat(parts, dim=-1)
+        memory, hidden = self.gru(steps, hidden)
         read = [memory]
         for key, grid in zip(self.camera_keys, cells, strict=True):
             readout = self.readouts[key.replace(".", "_")] if self.readouts else None
             if readout is not None:
                 read.append(readout(memory.flatten(0, 1), grid).view(b, t, -1))
-        return self.head(torch.cat(read, dim=-1)), hidden
+        if self.episode_attention is not None:
+            recalled, past = self.episode_attention(memory, steps, past)
+            read.append(recalled)
+        return self.head(torch.cat(read, dim=-1)), (hidden, past)
 
     def _instruction(
         self, batch: dict[str, Tensor], b: int, t: int, device: torch.device
