@@ -89,7 +89,7 @@ def prepare_task(d: Driver, task: str, stages: set[str]) -> None:
     to_train = [s for s in settings if "train" in stages and needs_training(d, task, s)]
     # lerobot-train reads the LeRobot dataset, the memory trainer the NPZ episodes.
     need_lerobot = any(s.trainer != "memory" for s in to_train)
-    need_npz = len(to_train) > len([s for s in to_train if s.trainer != "memory"])
+    need_npz = any(s.trainer == "memory" for s in to_train)
     # Collection is only needed for a dataset that is not converted yet; with "collect"
     # asked for explicitly it runs anyway (a no-op when the episodes are there).
     if "collect" in stages or (need_lerobot and d.converted(task) is None) or need_npz:
