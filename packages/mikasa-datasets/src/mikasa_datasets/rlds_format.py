@@ -106,7 +106,7 @@ def _deflate_zlib(data: bytes) -> bytes:
 
 
 # zlib streams of PNG's IDAT: Intel ISA-L's where installed (`fast_zlib`), else zlib's.
-# Measured on 128x128 MIKASA renders (2-core machine): ISA-L level 1 0.15 ms and 25.9 KB per
+# Measured on 128x128 MIKASA renders (a 2-core CPU machine): ISA-L level 1 0.15 ms and 25.9 KB per
 # image, zlib level 1 with the RLE strategy 0.55 ms and 25.4 KB; inflating, ISA-L ~2x
 # zlib. Either stream decodes to the same pixels.
 _deflate = _deflate_zlib if fast_zlib is zlib else functools.partial(fast_zlib.compress, level=1)

@@ -185,7 +185,7 @@ LEAKS: tuple[Leak, ...] = (
         "gripper rest on the side of the target that faces the start, so the frame of the "
         "switch tells the start row, and pulling the cube back the way it came needs no memory",
         evidence="a LeRobot Diffusion Policy trained on 200 oracle demonstrations and fed one "
-        "frame (docs/BASELINES.md before the fix, at commit 47667f7; H200 machine): 29/50 = 58 % [44 %, 71 %] against chance 0.35 "
+        "frame (docs/BASELINES.md before the fix, at commit 47667f7; one NVIDIA H200): 29/50 = 58 % [44 %, 71 %] against chance 0.35 "
         "(row guess) and the memoryless oracle's 21/50; a probe of the oracle's pushes "
         "(benchmarks/leak_probes/take_it_back_push_side.py, 24 seeds, state obs): the TCP's y "
         "offset from the target at the switch is -0.032..-0.016 (row -1), -0.001..+0.019 "
