@@ -34,7 +34,7 @@ needed for CPU rendering: mesa-vulkan-drivers):
     python benchmarks/bench_throughput.py --workers 16 --render-device cpu \
         --gpu-render-workers 2 --json gpu16_mixed2.json
 
-Targets (steady-state ratio): >= 1.8x with 2 workers on a 2-core machine, >= 12x with 16
+Targets (steady-state ratio): >= 1.8x with 2 workers on a 2-core CPU machine, >= 12x with 16
 workers on a machine with one NVIDIA GPU and 16 CPU cores, over the serial reference runner where it was timed
 (``--reference-serial``: one env, one process, ManiSkill's per-camera rendering and robot
 meshes, i.e. the reference runner's loop), else over our own serial loop (stricter: our

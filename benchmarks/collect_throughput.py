@@ -7,7 +7,7 @@ this script also runs from the conversion environment), and prints per run episo
 overall and after start-up (from the first finished attempt on), frames per episode, and
 NPZ bytes::
 
-    python benchmarks/collect_throughput.py --episodes 8 --workers 1,2          # 2-core machine
+    python benchmarks/collect_throughput.py --episodes 8 --workers 1,2          # 2-core CPU machine
     python benchmarks/collect_throughput.py --episodes 32 --workers 16 --project \\
         --sim-python "$(command -v python)" --json collect32.json              # 16-core machine
 

@@ -13,7 +13,7 @@ same run for comparison (``--no-baseline`` skips it: it needs ManiSkill's full r
     python benchmarks/env_throughput.py --suite rl           # the 32 RL ids, each next to its VLA id
     python benchmarks/env_throughput.py --json results/env_throughput.json
 
-Reference (published implementation, this 2-core machine, CPU PhysX + lavapipe): median
+Reference (published implementation, a 2-core CPU machine, CPU PhysX + lavapipe): median
 7.5 rgb steps/s and 265 state steps/s, reset 0.14 s, warm make 0.29 s.
 """
 

@@ -8,7 +8,7 @@ memory.
 
 Prints, per start row, the range of the cube's and the TCP's y offset from the target at
 the switch (state obs, the oracle's pushes). Rows whose ranges do not overlap can be told
-apart from that one frame. 2-core machine, 24 seeds, before the handover (DEVIATIONS.md,
+apart from that one frame. 2-core CPU machine, 24 seeds, before the handover (DEVIATIONS.md,
 Fixed #29): TCP dy row -1 -0.032..-0.016, row 0 -0.001..+0.019, row +1 +0.015..+0.041 (cube
 dy -0.021..-0.010, -0.003..+0.017, +0.002..+0.022). With it (the cube set down at the
 target's near edge, the arm at its rest pose): cube dy +0.000 in every row, TCP dy
