@@ -45,6 +45,7 @@ else:
     from lerobot_policy_memory_gru import MemoryGRUConfig, MemoryGRUPolicy
     from lerobot_policy_memory_gru import train as memory_train
     from lerobot_policy_memory_gru.modeling_memory_gru import (
+        chunk_targets,
         instruction_word_buckets,
         leading_padding,
         shift_left,
@@ -88,24 +89,30 @@ else:
         register_third_party_plugins()
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
-    @pytest.mark.parametrize("attention", [0, 8], ids=["gru", "gru+episode-attention"])
-    def test_acting_step_by_step_equals_the_training_pass(attention: int) -> None:
+    @pytest.mark.parametrize(
+        ("attention", "chunk"),
+        [(0, 1), (8, 1), (0, 4)],
+        ids=["gru", "gru+episode-attention", "gru+chunks"],
+    )
+    def test_acting_step_by_step_equals_the_training_pass(attention: int, chunk: int) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
-        training pass predicts for the whole sequence: the GRU (and the attention over the
-        episode's earlier steps) see the same history."""
-        policy = tiny_policy(episode_attention_dim=attention)
+        training pass predicts for the whole sequence (the first action of each step's chunk):
+        the GRU (and the attention over the episode's earlier steps) see the same history."""
+        policy = tiny_policy(episode_attention_dim=attention, chunk_size=chunk)
         batch = sequence_batch(2, 6)
         with torch.no_grad():
-            whole = policy.actions(batch, 2, 6)[0]
+            whole = policy.actions(batch, 2, 6)[0][:, :, 0]
         policy.reset()
         for t in range(6):
             step = {k: (v[:, t] if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
             torch.testing.assert_close(policy.select_action(step), whole[:, t])
 
-    def test_leading_padding_is_where_the_episode_starts() -> None:
+    @pytest.mark.parametrize("chunk", [1, 3])
+    def test_leading_padding_is_where_the_episode_starts(chunk: int) -> None:
         """A lerobot-train window that reaches before the episode (padding at its start) has
-        the same loss as the episode alone: the GRU starts at the first real frame."""
-        policy = tiny_policy(random_shift_pixels=0)
+        the same loss as the episode alone: the GRU starts at the first real frame, and no
+        action chunk reaches into the padding."""
+        policy = tiny_policy(random_shift_pixels=0, chunk_size=chunk)
         batch = sequence_batch(1, 4)
         padded = {
             k: (torch.cat([v[:, :1].expand(1, 3, *v.shape[2:]), v], 1) if k != "task" else v)
@@ -121,6 +128,13 @@ else:
         assert leading_padding(pad).tolist() == [2, 0]
         x = torch.arange(8).view(2, 4)
         assert shift_left(x, torch.tensor([2, 0])).tolist() == [[2, 3, 3, 3], [4, 5, 6, 7]]
+
+    def test_chunk_targets_stop_at_the_sequence_end() -> None:
+        values = torch.arange(4.0).view(1, 4)
+        valid = torch.tensor([[1.0, 1.0, 1.0, 0.0]])  # the last step is padding
+        targets, weight = chunk_targets(values, valid, 2)
+        assert targets[0, :, 0].tolist() == [0, 1, 2, 3] and targets[0, :3, 1].tolist() == [1, 2, 3]
+        assert weight[0].tolist() == [[1, 1], [1, 1], [1, 0], [0, 0]]
 
     def test_instruction_buckets_are_stable_words() -> None:
         idx, off = instruction_word_buckets(["Touch the RED cube.", ""], 1024)

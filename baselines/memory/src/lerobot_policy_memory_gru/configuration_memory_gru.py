@@ -66,6 +66,12 @@ class MemoryGRUConfig(PreTrainedConfig):
     # GRU alone; 0 turns it off.
     episode_attention_dim: int = 0
     head_dim: int = 256
+    # Action chunking (Zhao et al., 2023): the head predicts this step's action and the next
+    # chunk_size - 1; acting uses the first, the later ones are training targets only. A
+    # decision whose effect shows over several later steps (the turn towards the remembered
+    # cube) then weighs chunk_size times at the step where it is made, and the steps after it
+    # cannot be explained by the arm's own motion alone.
+    chunk_size: int = 1
     # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
     # that the steps where the demonstrator changes course count (0: a plain mean).
     keyframe_weight: float = 10.0
@@ -84,6 +90,8 @@ class MemoryGRUConfig(PreTrainedConfig):
             raise ValueError(
                 f"n_action_steps must be 1 (the policy acts on every frame), got {self.n_action_steps}"
             )
+        if self.chunk_size < 1:
+            raise ValueError(f"chunk_size must be >= 1, got {self.chunk_size}")
         if len(self.vision_channels) != 3:
             raise ValueError(f"vision_channels needs 3 entries, got {self.vision_channels}")
 

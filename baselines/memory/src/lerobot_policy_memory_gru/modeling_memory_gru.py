@@ -7,7 +7,8 @@ Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
   ``(B, T, S)`` and the actions ``(B, T, A)`` normalised by the preprocessor, ``action_is_pad``
   ``(B, T)``, ``task`` (B instructions). Returns the L1 loss over the steps that are not
   padding, each step weighted by how much the demonstrator's action changes there
-  (`keyframe_weights`).
+  (`keyframe_weights`); with ``chunk_size`` K > 1, step t is also scored on the actions of
+  steps t+1 .. t+K-1 that the sequence holds (`chunk_targets`).
 * acting, ``select_action(batch)``: every camera ``(B, C, H, W)``, the state ``(B, S)``, ``task``;
   one step of the GRU from the hidden state the previous call left (``reset()`` clears it at
   an episode's start). Returns ``(B, A)``, normalised (the postprocessor undoes it).
@@ -84,6 +85,16 @@ def keyframe_weights(actions: Tensor, valid: Tensor, strength: float) -> Tensor:
         return torch.ones_like(valid)
     change = (actions[:, 1:] - actions[:, :-1]).abs().mean(dim=-1) * valid[:, 1:] * valid[:, :-1]
     return 1.0 + strength * F.pad(change, (1, 0))
+
+
+def chunk_targets(values: Tensor, valid: Tensor, size: int) -> tuple[Tensor, Tensor]:
+    """For every step t of ``values (B, T, ...)``, the values of steps t .. t+size-1,
+    ``(B, T, size, ...)``, and whether each is a real step of the sequence, ``(B, T, size)``."""
+    t, device = values.shape[1], values.device
+    steps = torch.arange(t, device=device)[:, None] + torch.arange(size, device=device)
+    inside = steps < t
+    steps = steps.clamp(max=t - 1)
+    return values[:, steps], valid[:, steps] * inside.to(valid.dtype)
 
 
 class CameraEncoder(nn.Module):
@@ -233,7 +244,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         self.head = nn.Sequential(
             nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
-            nn.Linear(config.head_dim, config.action_feature.shape[0]),
+            nn.Linear(config.head_dim, config.action_feature.shape[0] * config.chunk_size),
         )
         self.reset()
 
@@ -271,12 +282,13 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             pad = shift_left(pad, lead) | (
                 torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
             )
-        predicted, _ = self.actions(batch, b, t)
+        predicted, _ = self.actions(batch, b, t)  # (B, T, K, A)
         valid = (~pad).to(predicted.dtype)
-        error = (predicted - batch[ACTION]).abs().mean(dim=-1) * valid
         weight = valid * keyframe_weights(batch[ACTION], valid, self.config.keyframe_weight)
-        loss = (error * weight).sum() / weight.sum().clamp(min=1e-6)
-        l1 = error.sum() / valid.sum().clamp(min=1.0)
+        targets, target_weight = chunk_targets(batch[ACTION], weight, self.config.chunk_size)
+        error = (predicted - targets).abs().mean(dim=-1)  # (B, T, K)
+        loss = (error * target_weight).sum() / target_weight.sum().clamp(min=1e-6)
+        l1 = (error[:, :, 0] * valid).sum() / valid.sum().clamp(min=1.0)
         return loss, {"l1_loss": l1.item()}
 
     @torch.no_grad()
@@ -290,7 +302,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             )
         step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
         predicted, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
-        return predicted
+        return predicted[:, :, 0]
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -306,9 +318,9 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         hidden: Tensor | None = None,
         past: tuple[Tensor, Tensor] | None = None,
     ) -> tuple[Tensor, tuple[Tensor, tuple[Tensor, Tensor] | None]]:
-        """The actions ``(B, T, A)`` for ``T`` steps that follow the GRU state ``hidden`` and
-        the episode attention's keys/values ``past`` (None: an episode's start), and both
-        after them."""
+        """The action chunks ``(B, T, chunk_size, A)`` for ``T`` steps that follow the GRU
+        state ``hidden`` and the episode attention's keys/values ``past`` (None: an episode's
+        start), and both after them."""
         parts, cells = [], []
         for key in self.camera_keys:
             images = batch[key].flatten(0, 1)
@@ -331,7 +343,8 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         if self.episode_attention is not None:
             recalled, past = self.episode_attention(memory, steps, past)
             read.append(recalled)
-        return self.head(torch.cat(read, dim=-1)), (hidden, past)
+        chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
+        return chunks, (hidden, past)
 
     def _instruction(
         self, batch: dict[str, Tensor], b: int, t: int, device: torch.device
