@@ -180,7 +180,7 @@ def make_settings(history: int) -> dict[str, Setting]:
             "memory_gru",
             "GRU memory",
             "every frame since the reset (a GRU's state); acts every step",
-            {"policy.type": "memory_gru", "policy.chunk_size": "8"},
+            {"policy.type": "memory_gru", "policy.chunk_size": "8", "policy.color_dim": "16"},
             memory_tiny,
             trainer="memory",
         ),

@@ -49,6 +49,9 @@ class MemoryGRUConfig(PreTrainedConfig):
     # Per-camera encoder: three strided convolutions, then a linear layer.
     vision_channels: tuple[int, ...] = (32, 64, 64)
     vision_dim: int = 256
+    # Per-pixel colour features (a 1x1 convolution) max-pooled to each grid cell and over the
+    # frame, so that small cubes keep their colour; 0 turns it off.
+    color_dim: int = 0
     state_dim: int = 64
     # Whether the GRU sees the robot's state. Without it, where the arm is heading has to be
     # read from the cameras, so the state cannot stand in for the memory (copycat).

@@ -103,9 +103,16 @@ class CameraEncoder(nn.Module):
     Two strided convolutions give the grid (each cell with its x, y in [-1, 1] appended, so
     that what is read from a cell says where it is); a third convolution and a linear layer
     give the global vector.
+
+    With ``color_dim`` > 0, a per-pixel colour branch (a 1x1 convolution) is max-pooled to
+    each cell and over the whole frame and appended to both: a cube a few pixels wide on a
+    textured table keeps its colour, where the strided convolutions average it with the wood
+    around it.
     """
 
-    def __init__(self, shape: Sequence[int], channels: Sequence[int], out_dim: int) -> None:
+    def __init__(
+        self, shape: Sequence[int], channels: Sequence[int], out_dim: int, color_dim: int = 0
+    ) -> None:
         super().__init__()
         c, h, w = shape
         c1, c2, c3 = channels
@@ -126,15 +133,26 @@ class CameraEncoder(nn.Module):
         self.register_buffer(
             "coords", torch.stack([xs, ys]).flatten(1).T.contiguous(), persistent=False
         )
-        self.cell_dim = c2 + 2
+        self.grid_size = (gh, gw)
+        self.color = (
+            nn.Sequential(nn.Conv2d(c, color_dim, kernel_size=1), nn.ReLU()) if color_dim else None
+        )
+        self.cell_dim = c2 + 2 + color_dim
+        self.out_dim = out_dim + color_dim
         self.proj = nn.Sequential(nn.Linear(flat, out_dim), nn.LayerNorm(out_dim), nn.ReLU())
 
     def forward(self, images: Tensor) -> tuple[Tensor, Tensor]:
-        """``(N, C, H, W)`` -> global ``(N, out_dim)``, cells ``(N, cells, channels + 2)``."""
-        grid = self.trunk(images - 0.5)
-        cells = grid.flatten(2).transpose(1, 2)
-        coords = self.coords.expand(cells.shape[0], -1, -1)
-        return self.proj(self.top(grid)), torch.cat([cells, coords], dim=-1)
+        """``(N, C, H, W)`` -> global ``(N, out_dim)``, cells ``(N, cells, cell_dim)``."""
+        centred = images - 0.5
+        grid = self.trunk(centred)
+        vector = self.proj(self.top(grid))
+        cells = [grid.flatten(2).transpose(1, 2), self.coords.expand(grid.shape[0], -1, -1)]
+        if self.color is not None:
+            colors = self.color(centred)
+            pooled = F.adaptive_max_pool2d(colors, self.grid_size)
+            cells.append(pooled.flatten(2).transpose(1, 2))
+            vector = torch.cat([vector, colors.amax(dim=(2, 3))], dim=-1)
+        return vector, torch.cat(cells, dim=-1)
 
 
 class MemoryReadout(nn.Module):
@@ -206,12 +224,15 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         self.encoders = nn.ModuleDict(
             {
                 name: CameraEncoder(
-                    config.image_features[key].shape, config.vision_channels, config.vision_dim
+                    config.image_features[key].shape,
+                    config.vision_channels,
+                    config.vision_dim,
+                    config.color_dim,
                 )
                 for name, key in zip(names, self.camera_keys, strict=True)
             }
         )
-        step_dim = config.vision_dim * len(self.camera_keys)
+        step_dim = sum(encoder.out_dim for encoder in self.encoders.values())
         state = config.robot_state_feature
         self.state_proj = None
         if state is not None and config.use_state:

@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         optimizer.load_state_dict(saved["optimizer"])
         step, log, train_s = saved["step"], saved["log"], saved["train_s"]
         rng.bit_generator.state = saved["numpy_rng"]
-        torch.set_rng_state(saved["torch_rng"])
+        torch.set_rng_state(saved["torch_rng"].cpu())  # map_location moved it to the device
         print(f"[memory-train] resumed at step {step}", flush=True)
     params = sum(p.numel() for p in policy.parameters())
     info = {
