@@ -7,6 +7,7 @@ steps/s and supervised frames/s (the first ``--warmup`` steps excluded). Needs l
 baselines/memory (``.venv-datasets`` on a CPU machine)::
 
     .venv-datasets/bin/python benchmarks/memory_train_throughput.py --device cpu --batch-size 16
+    .venv-datasets/bin/python benchmarks/memory_train_throughput.py --device cpu --policy color_dim=0
     python benchmarks/memory_train_throughput.py --device cuda --length 50 --batch-size 32
 """
 
@@ -29,6 +30,13 @@ def main() -> None:
     p.add_argument("--warmup", type=int, default=5)
     p.add_argument("--batch-size", type=int, default=16, help="episodes per step")
     p.add_argument("--device", default="cpu")
+    p.add_argument(
+        "--policy",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a MemoryGRUConfig field, as mikasa-memory-train takes it (repeatable)",
+    )
     a = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         data = write_synthetic_task(
@@ -37,6 +45,7 @@ def main() -> None:
         out = Path(tmp) / "run"
         common = ["--data", str(data), "--out", str(out), "--batch-size", str(a.batch_size)]
         common += ["--device", a.device, "--log-every", "1", "--save-every-s", "1e9"]
+        common += [arg for pair in a.policy for arg in ("--policy", pair)]
         memory_train.main([*common, "--steps", str(a.steps)])
         log = json.loads((out / memory_train.LOG_FILE).read_text())
     timed = [r["steps_per_s"] for r in log["log"][a.warmup :]]

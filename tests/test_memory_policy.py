@@ -61,6 +61,8 @@ else:
         "instruction_dim": 4,
         "hidden_dim": 16,
         "head_dim": 16,
+        "color_dim": 2,
+        "chunk_size": 2,
     }
     TINY_ARGS = [arg for k, v in TINY.items() for arg in ("--policy", f"{k}={json.dumps(v)}")]
 

@@ -51,7 +51,7 @@ class MemoryGRUConfig(PreTrainedConfig):
     vision_dim: int = 256
     # Per-pixel colour features (a 1x1 convolution) max-pooled to each grid cell and over the
     # frame, so that small cubes keep their colour; 0 turns it off.
-    color_dim: int = 0
+    color_dim: int = 16
     state_dim: int = 64
     # Whether the GRU sees the robot's state. Without it, where the arm is heading has to be
     # read from the cameras, so the state cannot stand in for the memory (copycat).
@@ -74,7 +74,7 @@ class MemoryGRUConfig(PreTrainedConfig):
     # decision whose effect shows over several later steps (the turn towards the remembered
     # cube) then weighs chunk_size times at the step where it is made, and the steps after it
     # cannot be explained by the arm's own motion alone.
-    chunk_size: int = 1
+    chunk_size: int = 8
     # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
     # that the steps where the demonstrator changes course count (0: a plain mean).
     keyframe_weight: float = 10.0
