@@ -7,7 +7,8 @@
 #     bash docs/lab-notes/memory-baseline/gpu_drivers.sh LIMIT_S STAGES [DRIVER_ARGS...]
 #
 # STAGES: the drivers' --stages (collect first, in a call of its own: collect; then
-# train,eval). Installs baselines/memory into the simulator's site, runs the drivers on
+# train,eval). ONLY=TASK[,TASK...] runs just those tasks' drivers; VARIANT="DRIVER_ARGS" adds
+# a second RememberColor3 driver (below). Installs baselines/memory into the simulator's site, runs the drivers on
 # /tmp/lrb with --time-limit LIMIT_S (run it again to go on: the drivers resume), then
 # writes the table and packs the records into $OUT/pack.tar.gz, with the shipped tasks'
 # checkpoints as $OUT/lrb-<task>.tar. Demonstrations per task and worker processes per
@@ -31,10 +32,14 @@ driver() {  # OUT TASK EPISODES WORKERS [DRIVER_ARGS...]
 }
 for entry in "${TASKS[@]}"; do
   IFS=: read -r task episodes workers <<<"$entry"
+  # ONLY="TASK[,TASK...]": just these tasks' drivers
+  [ -z "${ONLY:-}" ] || [[ ",$ONLY," == *",$task,"* ]] || continue
   driver /tmp/lrb "$task" "$episodes" "$workers" "$@"
 done
 # VARIANT="DRIVER_ARGS": RememberColor3 once more with these arguments too, on the same
 # demonstrations, in /tmp/lrb-variant (not in the table; packed as pack-variant.tar.gz).
+# With all six tasks it did not fit one 80 GB GPU (each RememberColor3 training holds its
+# 3,000 episodes there, 4.6 GB, besides the colour features' activations): use it with ONLY.
 if [ -n "${VARIANT:-}" ] && [ "$stages" != collect ]; then
   mkdir -p /tmp/lrb-variant/records/RememberColor3-VLA-v0 && ln -sfn /tmp/lrb/data /tmp/lrb-variant/data
   cp /tmp/lrb/records/RememberColor3-VLA-v0/collect.json /tmp/lrb-variant/records/RememberColor3-VLA-v0/
@@ -48,7 +53,7 @@ python3 baselines/lerobot/run_baselines.py --policies memory-gru --references ""
 if [ -d /tmp/lrb-variant/records ]; then
   python3 baselines/lerobot/run_baselines.py --tasks RememberColor3-VLA-v0 --policies memory-gru \
     --references "" --stages table --out /tmp/lrb-variant --doc /tmp/lrb-variant/BASELINES.md \
-    --pack "${OUT:-/tmp}/pack-variant.tar.gz" "$@" $VARIANT 2>&1 | tail -n 3
+    --pack "${OUT:-/tmp}/pack-variant.tar.gz" "$@" ${VARIANT:-} 2>&1 | tail -n 3
 fi
 for run in /tmp/lrb /tmp/lrb-variant; do
   for t in RememberColor3-VLA-v0 ShellGameTouch-VLA-v0; do

@@ -89,7 +89,8 @@ def keyframe_weights(actions: Tensor, valid: Tensor, strength: float) -> Tensor:
 
 def chunk_targets(values: Tensor, valid: Tensor, size: int) -> tuple[Tensor, Tensor]:
     """For every step t of ``values (B, T, ...)``, the values of steps t .. t+size-1,
-    ``(B, T, size, ...)``, and whether each is a real step of the sequence, ``(B, T, size)``."""
+    ``(B, T, size, ...)``, and their weights from ``valid (B, T)`` (0 for steps past the
+    sequence's end), ``(B, T, size)``."""
     t, device = values.shape[1], values.device
     steps = torch.arange(t, device=device)[:, None] + torch.arange(size, device=device)
     inside = steps < t
