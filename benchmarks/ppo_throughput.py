@@ -72,6 +72,16 @@ def trainer(env_id: str, mode: str, num_envs: int, workers: int, iterations: int
     )
 
 
+def write_figures(path: str, env_id: str, rows: list[dict]) -> None:
+    """``rows`` with the env id and this machine's CPU count as JSON at ``path`` (written to a
+    temporary file, then renamed)."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(dict(env_id=env_id, cpu_count=os.cpu_count(), rows=rows), indent=2))
+    tmp.replace(out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env-id", default="RememberColor3-v0")
@@ -98,11 +108,7 @@ def main() -> None:
               f"| training {train['steady_sps']:7.0f} st/s (rollout {100 * train['rollout_share']:.0f} %, "
               f"update {100 * train['update_share']:.0f} %)", flush=True)
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(dict(env_id=args.env_id, cpu_count=os.cpu_count(), rows=rows), indent=2))
-        tmp.replace(path)
+        write_figures(args.json, args.env_id, rows)
 
 
 if __name__ == "__main__":

@@ -24,15 +24,14 @@ Needs the RL release (``pip install -e legacy/rl``).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pickle
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from ppo_throughput import write_figures  # this directory's PPO throughput script
 
 MODES = ("state", "rgb", "rgb_joints")
 
@@ -142,11 +141,7 @@ def main() -> None:
               f"| {r['stack_ms']:.2f} | {r['mb_per_worker']:.2f} | {r['measured_ms']:.1f} | {r['unexplained_ms']:.1f} "
               f"| {r['env_steps_per_s']:.0f} | {r['bound']} |")
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(dict(env_id=args.env_id, cpu_count=os.cpu_count(), rows=rows), indent=2))
-        tmp.replace(path)
+        write_figures(args.json, args.env_id, rows)
 
 
 if __name__ == "__main__":
