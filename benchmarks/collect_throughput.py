@@ -9,7 +9,7 @@ NPZ bytes::
 
     python benchmarks/collect_throughput.py --episodes 8 --workers 1,2          # 2-core CPU machine
     python benchmarks/collect_throughput.py --episodes 32 --workers 16 --project \\
-        --sim-python "$(command -v python)" --json collect32.json              # 16-core machine
+        --sim-python "$(command -v python)" --json collect32.json              # machine with 16 CPU cores
 
 ``--project [EPISODES]`` projects the whole plan (EPISODES, default 250 as published, of each
 of the 90 canonical tasks: ``mikasa-collect --split all``) with the most envs collecting at

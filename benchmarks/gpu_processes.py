@@ -3,7 +3,7 @@
 A pool whose workers each see every GPU opens a CUDA context per worker on each of them
 (ManiSkill's reset forks torch's RNG on all visible devices) and renders on the first only;
 `mikasa_envs.workers.use_one_gpu` shows each worker one GPU, round robin. This script is how
-that was checked on a multi-GPU machine: for each GPU it prints the most processes seen at once,
+that was checked on a machine with several NVIDIA GPUs: for each GPU it prints the most processes seen at once,
 the peak memory they held and the mean utilisation, and how many processes held a context on
 more than one GPU (should be 0 besides the driver process of a trainer or an in-process policy).
 

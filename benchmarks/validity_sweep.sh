@@ -11,8 +11,8 @@
 # other tasks (`mikasa-bench validity --update`); BENCH is the mikasa-bench to use. Interrupted (a time limit,
 # kill -9): run the same command again; each policy's run resumes where it stopped.
 # Cost: ~2 M env steps per policy over the 90 tasks (the oracle stops at its first success).
-# Measured: oracle 321 s and memoryless 491 s with 32 workers on a 32-core machine (both end
-# on a tail of long episodes); zero 2,627 s with 2 workers on a 2-core machine (774 steps/s);
+# Measured: oracle 321 s and memoryless 491 s with 32 workers on a machine with 32 CPU cores (both end
+# on a tail of long episodes); zero 2,627 s with 2 workers on a 2-core CPU machine (774 steps/s);
 # random is the slowest (a flailing arm makes contact-rich physics: ~200 steps/s on 2 cores).
 set -euo pipefail
 out=${1:-results/validity}; episodes=${2:-50}; workers=${3:-$(nproc)}

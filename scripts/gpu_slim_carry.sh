@@ -1,16 +1,16 @@
 #!/usr/bin/env bash
-# A GPU machine without network that takes at most 64 MiB per call (tracked tree + carried paths), and
-# .gpu/ (built by the workplace's gpu-carry.sh) is ~54 MiB, which with the tracked tree
+# An offline GPU machine takes uploads of at most 64 MiB (tracked tree + extra paths), and
+# .gpu/ (the simulator's wheels and caches for that machine) is ~54 MiB, which with the tracked tree
 # (~10 MiB) leaves no room for a run's resume.pt. This packs .gpu/ smaller: the sapien wheel
 # travels as an xz tarball of its contents (28 MB instead of 39 MB), the rest as one xz tarball.
 #
 #   bash scripts/gpu_slim_carry.sh pack      # here, once after gpu-carry.sh: .gpu/ -> .gpux/ (~43 MiB)
-#   bash scripts/gpu_slim_carry.sh unpack    # there, first in each call's command (carry .gpux and .gl):
+#   bash scripts/gpu_slim_carry.sh unpack    # there, first in each command (upload .gpux and .gl):
 #                                            # .gpux/ -> .gpu/, then .gpu/run.sh as usual
 #
-# Example call: `bash scripts/gpu_slim_carry.sh unpack && .gpu/run.sh <command>` with carry
-# [".gpux", ".gl", <the run's resume.pt>]. A warm machine does not keep .gpu/ between calls
-# (it is git-ignored and not carried), so every call unpacks (a few seconds).
+# Example: `bash scripts/gpu_slim_carry.sh unpack && .gpu/run.sh <command>`, uploading
+# .gpux, .gl and the run's resume.pt. .gpu/ is not kept between commands (it is git-ignored
+# and not uploaded), so every command unpacks (a few seconds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 case "${1:-}" in

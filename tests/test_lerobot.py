@@ -486,7 +486,7 @@ else:
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     ) -> None:
         """lerobot 0.4's save_episode fails on numpy >= 2.4 (float() of shape-(1,) arrays,
-        seen with lerobot's own environment on a GPU machine): the converter says so and writes nothing."""
+        seen with lerobot's own environment on a machine with a GPU): the converter says so and writes nothing."""
         task = write_synthetic_task(tmp_path / "data_npz", ENV_ID, [10])
         monkeypatch.setattr(lerobot_write.np, "__version__", "2.4.6")
         with pytest.raises(RuntimeError, match=r"numpy 2\.4\.6.*numpy<2\.4"):

@@ -1,5 +1,5 @@
 """docs/BASELINES.md (+ .json) from the LeRobot baseline driver's records, and the pack of
-records, table and log tails that travels back from a GPU machine without network.
+records, table and log tails that travels back from an offline machine with a GPU.
 
 `build_table` gathers everything the table shows into a JSON-ready dict (chance from
 ``mikasa_bench.results.chance``, the memory type from the task manifest); `render_markdown` writes
@@ -408,7 +408,7 @@ def restore_records(d: Driver, table_json: Path) -> int:
 
 def pack(d: Driver, path: Path) -> None:
     """A .tar.gz of the records, the table (md + json) and the logs' tails, for the trip back
-    from a GPU machine without network (the records are small; datasets and checkpoints stay behind)."""
+    from an offline machine with a GPU (the records are small; datasets and checkpoints stay behind)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     doc = Path(d.a.doc)

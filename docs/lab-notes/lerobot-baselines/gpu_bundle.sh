@@ -1,29 +1,30 @@
 #!/usr/bin/env bash
-# The lerobot side of a GPU machine without network (offline; Python 3.12, torch 2.11 + torchvision
+# The lerobot side of a machine with a GPU (offline; Python 3.12, torch 2.11 + torchvision
 # 0.26 preinstalled), in two halves:
 #
 #   bash docs/lab-notes/lerobot-baselines/gpu_bundle.sh download     # here: the wheels, into .carry/ (~91 MB)
-#   source docs/lab-notes/lerobot-baselines/gpu_bundle.sh env        # there, in each call's command
+#   source docs/lab-notes/lerobot-baselines/gpu_bundle.sh env        # there, at the start of each command
 #   bash docs/lab-notes/lerobot-baselines/gpu_bundle.sh check        # there, after env: what imports, what is missing
 #
 # "download" fetches lerobot 0.4.4 (--no-deps) and what its dataset, training and the two
 # policies' code import beyond the image (the list below), for cp312 manylinux, into
 # .carry/lerobot_wheels/ (~51 MB) and .carry/lerobot_av/ (PyAV, ~40 MB), both git-ignored:
-# with the tracked tree each fits the 64 MiB one call may carry, so each travels in a call
-# of its own (in either order), without .gpu.
+# with the tracked tree each fits in one upload of at most 64 MiB to the offline machine, so
+# each goes up in a command of its own (in either order), without .gpu.
 #
-# "env" (sourced, on the GPU machine) installs carried wheels into /tmp/lrsite when they
-# came with this call, and stops with a message until both halves are there (a warm machine keeps /tmp between calls: later calls need not carry
-# them), gives torchcodec an FFmpeg, and exports the variables every call needs: the
-# simulator's site from an earlier `.gpu/run.sh` call (/tmp/site, /tmp/site2; the mesh cache
-# and IPython stub copied to /tmp/mikasa-gpu by that call, see README.md), Vulkan, and
+# "env" (sourced, on the offline machine with the GPU) installs uploaded wheels into /tmp/lrsite
+# when they came with this command, and stops with a message until both halves are there (the
+# machine keeps /tmp between commands while it stays up: later commands need not upload them),
+# gives torchcodec an FFmpeg, and exports the variables every command needs: the simulator's
+# site from an earlier `.gpu/run.sh` command (/tmp/site, /tmp/site2; the mesh cache and
+# IPython stub copied to /tmp/mikasa-gpu by that command, see README.md), Vulkan, and
 # PYTHONPATH with /tmp/lrsite first (its huggingface-hub 0.35 must shadow the image's 1.x).
 #
 # FFmpeg: torchcodec (lerobot's default video backend) links against FFmpeg's shared
 # libraries, which the image lacks. The PyAV wheel lerobot needs anyway bundles FFmpeg 7.1
 # (with the dav1d AV1 decoder) under hashed file names; links under the names torchcodec's
 # FFmpeg-7 core asks for (libavcodec.so.61, ...) in /tmp/avlink, on LD_LIBRARY_PATH, let it
-# load them. Checked on the 2-core machine: torchcodec 0.13 decodes the converter's AV1
+# load them. Checked on a 2-core CPU machine: torchcodec 0.13 decodes the converter's AV1
 # videos that way (`torchcodec._core.get_ffmpeg_library_versions()` -> 7.1.1).
 
 _here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The memory baseline's six tasks on an offline GPU machine, one driver per task side by side,
+# The memory baseline's six tasks on an offline machine with one NVIDIA GPU and 16 CPU cores, one driver per task side by side,
 # after the simulator and lerobot calls of docs/lab-notes/2026-11-26-lerobot-baselines-gpu-runs.md
 # (how it ran: docs/lab-notes/2026-12-07-memory-baseline-runs.md):
 #

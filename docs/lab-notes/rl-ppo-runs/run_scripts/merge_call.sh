@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Merge what a GPU machine's call of side_by_side.sh returned into the run's directory here:
+# Merge what a side_by_side.sh command on an offline GPU machine returned into the run's directory here:
 # the archive's files go in, its log_call.txt (that call's lines) is appended to log.txt (a
 # machine's log holds only what that machine saw, so copying it over would lose the rest), and
 # the newest resume.pt is named, and with COPY_RESUME_TO copied there (e.g. a committed resume).

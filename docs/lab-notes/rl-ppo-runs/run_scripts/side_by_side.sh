@@ -2,7 +2,7 @@
 # Train several PPO runs side by side on one machine, each in its own directory, each
 # resumed from its latest resume.pt when there is one (so a machine available for a limited time
 # can chain calls of this script), each stopped by --time-limit LIMIT_S, counted from the trainer's start
-# (its env workers' start included): a call on a GPU machine lasts about LIMIT_S plus the install of
+# (its env workers' start included): a command lasts about LIMIT_S plus the install of
 # .gpu/run.sh (~55 s), the last iteration and the packing.
 #
 #   bash docs/lab-notes/rl-ppo-runs/run_scripts/side_by_side.sh LIMIT_S RUNS_FILE [WORK_DIR] [ARCHIVE_DIR]
@@ -16,10 +16,10 @@
 # With ARCHIVE_DIR, each run's directory is packed into ARCHIVE_DIR/<name>.tgz at the end (its log
 # as log_call.txt, this call's lines alone: merge_call.sh appends them to the log here),
 # with only the KEEP_CKPTS (default 3) latest periodic ckpt_*.pt (a state checkpoint is
-# ~1.2 MB, an rgb one ~10 MB, and a GPU machine's call returns at most 16 MiB). Run from the repository root; PYTHON (default python3)
+# ~1.2 MB, an rgb one ~10 MB, and at most 16 MiB come back per file). Run from the repository root; PYTHON (default python3)
 # is the interpreter that has mikasa-robo-rl[train]. NUM_WORKERS, when set, overrides each run's
-# --num-workers (the last occurrence of a flag wins), so one run file serves the 16-core GPU machine
-# and, between its calls, this 2-core machine: NUM_WORKERS=2 bash side_by_side.sh ...
+# --num-workers (the last occurrence of a flag wins), so one run file serves one NVIDIA GPU with 16 CPU cores
+# and, between its commands there, a 2-core CPU machine: NUM_WORKERS=2 bash side_by_side.sh ...
 set -u
 limit=${1:?LIMIT_S}; runs_file=${2:?RUNS_FILE}; work=${3:-/tmp/ppo_runs}; archive=${4:-}
 root=$(pwd); python=${PYTHON:-python3}

@@ -1,6 +1,6 @@
 """Several envs of one process, stepped by their own threads, rendered in one GPU pass.
 
-On a GPU machine, CPU-simulated envs each render a handful of 128x128 pictures per step:
+On a machine with a GPU, CPU-simulated envs each render a handful of 128x128 pictures per step:
 the GPU does almost no work per pass, and what limits a pool of worker processes is the
 number of passes the processes queue on the one GPU (measured on an H200: 16 processes
 together finished ~29 episodes/s however small each pass). A `RenderBatcher` lets one

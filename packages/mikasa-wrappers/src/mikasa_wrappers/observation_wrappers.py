@@ -292,7 +292,7 @@ class FlattenRGBDObservationWrapper(gym.ObservationWrapper):
 def _concat_last_dim(tensors: list[torch.Tensor]) -> torch.Tensor:
     """``torch.cat(tensors, dim=-1)``; for CPU tensors through numpy, in this thread: torch
     hands copies of this size (100k values) to its thread pool, whose threads then spin
-    between steps (one env kept all 16 cores of a GPU machine busy and ran 20% slower)."""
+    between steps (one env kept all 16 cores of a machine with a GPU busy and ran 20% slower)."""
     if all(t.device.type == "cpu" and not t.requires_grad for t in tensors):
         return torch.from_numpy(np.concatenate([t.numpy() for t in tensors], axis=-1))
     return torch.cat(tensors, dim=-1)

@@ -110,7 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=RENDER_DEVICES,
         default=None,
         help="where workers render: auto (GPU if any, else CPU; default), cpu (lavapipe, "
-        "also on a GPU machine) or gpu",
+        "also on a machine with a GPU) or gpu",
     )
     run.add_argument(
         "--gpu-render-workers",

@@ -15,7 +15,7 @@ How ManiSkill 3.0.1 and SAPIEN 3 pick the render device (read from their sources
   lavapipe exists, so the GPU side is not yet observed. `check_render_device` verifies
   the outcome in every worker either way.)
 
-So rendering on the CPU (Mesa's lavapipe) on a GPU machine needs the Vulkan loader to see
+So rendering on the CPU (Mesa's lavapipe) on a machine with a GPU needs the Vulkan loader to see
 lavapipe only: a CPU-rendering worker sets ``VK_ICD_FILENAMES``/``VK_DRIVER_FILES`` to the
 lavapipe driver manifest before its first env is made. That must happen before Vulkan is
 initialised in the process, which is why the executors apply `worker_environment` when a

@@ -71,7 +71,7 @@ def starts_scene(episode: int) -> bool:
 
 RENDER_DEVICES: tuple[str, ...] = ("auto", "cpu", "gpu")
 """Where a worker renders its cameras. ``auto``: ManiSkill's default (a CUDA GPU if there is
-one, else the CPU); ``cpu``: Mesa's lavapipe, even on a GPU machine; ``gpu``: a CUDA GPU
+one, else the CPU); ``cpu``: Mesa's lavapipe, even on a machine with a GPU; ``gpu``: a CUDA GPU
 (an error if there is none). Not part of the canonical protocol, but recorded with it:
 renderers are not guaranteed to produce bit-identical pixels."""
 

@@ -308,7 +308,7 @@ def make_benchmark_env(env_id: str, config: BenchmarkConfig | None = None) -> An
     ``render_mode`` is ``"all"`` for metric-only runs and ``"rgb_array"`` when saving
     videos; overlays are forced on for videos (they only change ``render()`` frames, not
     observations), as upstream. ``config.render_device`` picks ManiSkill's render backend
-    (executors pass each worker its own device); to render on the CPU on a GPU machine the
+    (executors pass each worker its own device); to render on the CPU on a machine with a GPU the
     process must also have restricted Vulkan to lavapipe before its first env (see
     `mikasa_bench.media.render`).
     ``obs_mode="state"`` (non-canonical) uses `_state_chain` instead, which needs no
