@@ -92,22 +92,17 @@ else:
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
     @pytest.mark.parametrize(
-        ("attention", "chunk", "color", "cosine"),
-        [(0, 1, 0, False), (8, 1, 0, False), (0, 4, 3, True)],
-        ids=["gru", "gru+episode-attention", "gru+chunks+colour+cosine-readout"],
+        ("attention", "chunk", "color"),
+        [(0, 1, 0), (8, 1, 0), (0, 4, 3)],
+        ids=["gru", "gru+episode-attention", "gru+chunks+colour"],
     )
     def test_acting_step_by_step_equals_the_training_pass(
-        attention: int, chunk: int, color: int, cosine: bool
+        attention: int, chunk: int, color: int
     ) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
         training pass predicts for the whole sequence (the first action of each step's chunk):
         the GRU (and the attention over the episode's earlier steps) see the same history."""
-        policy = tiny_policy(
-            episode_attention_dim=attention,
-            chunk_size=chunk,
-            color_dim=color,
-            readout_cosine=cosine,
-        )
+        policy = tiny_policy(episode_attention_dim=attention, chunk_size=chunk, color_dim=color)
         batch = sequence_batch(2, 6)
         with torch.no_grad():
             whole = policy.actions(batch, 2, 6)[0][:, :, 0]

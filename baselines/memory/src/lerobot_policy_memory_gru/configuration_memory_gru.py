@@ -64,9 +64,6 @@ class MemoryGRUConfig(PreTrainedConfig):
     # Each camera's grid of local features read by attention queried with the GRU's state
     # (what the memory looks for, and where it is); 0 turns it off.
     readout_dim: int = 64
-    # Cosine attention with a learned sharpness for that readout (instead of scaled dot
-    # products, which start near uniform).
-    readout_cosine: bool = False
     # Attention from each step over every earlier step's inputs, so that what the cue showed
     # can be looked up when the decision comes rather than carried through the delay by the
     # GRU alone; 0 turns it off.

@@ -161,27 +161,16 @@ class MemoryReadout(nn.Module):
     look for (the remembered colour, the mug that hid the ball), the cells that match it give
     their features and their place."""
 
-    def __init__(self, cell_dim: int, hidden_dim: int, dim: int, cosine: bool = False) -> None:
+    def __init__(self, cell_dim: int, hidden_dim: int, dim: int) -> None:
         super().__init__()
         self.query = nn.Linear(hidden_dim, dim)
         self.key = nn.Linear(cell_dim, dim)
         self.value = nn.Linear(cell_dim, dim)
         self.scale = dim**-0.5
-        # Cosine attention with a learned sharpness (starting at 10): dot products of small
-        # projections start the softmax near uniform, where the readout is a plain average
-        # and little gradient asks it to look anywhere in particular.
-        self.log_sharpness = nn.Parameter(torch.tensor(2.3)) if cosine else None
 
     def weights(self, hidden: Tensor, cells: Tensor) -> Tensor:
         """The attention over the cells, ``(N, K)``."""
-        query, key = self.query(hidden), self.key(cells)
-        if self.log_sharpness is None:
-            scores = torch.einsum("nd,nkd->nk", query, key) * self.scale
-        else:
-            cosine = torch.einsum(
-                "nd,nkd->nk", F.normalize(query, dim=-1), F.normalize(key, dim=-1)
-            )
-            scores = cosine * self.log_sharpness.exp()
+        scores = torch.einsum("nd,nkd->nk", self.query(hidden), self.key(cells)) * self.scale
         return scores.softmax(dim=-1)
 
     def forward(self, hidden: Tensor, cells: Tensor) -> Tensor:
@@ -267,7 +256,6 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                     self.encoders[name].cell_dim,
                     config.hidden_dim,
                     config.readout_dim,
-                    config.readout_cosine,
                 )
                 for name in names
             }
