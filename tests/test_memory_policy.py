@@ -92,17 +92,19 @@ else:
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
     @pytest.mark.parametrize(
-        ("attention", "chunk", "color"),
-        [(0, 1, 0), (8, 1, 0), (0, 4, 3)],
-        ids=["gru", "gru+episode-attention", "gru+chunks+colour"],
+        ("attention", "chunk", "color", "points"),
+        [(0, 1, 0, 0), (8, 1, 0, 0), (0, 4, 3, 0), (8, 2, 3, 2)],
+        ids=["gru", "gru+episode-attention", "gru+chunks+colour", "all"],
     )
     def test_acting_step_by_step_equals_the_training_pass(
-        attention: int, chunk: int, color: int
+        attention: int, chunk: int, color: int, points: int
     ) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
         training pass predicts for the whole sequence (the first action of each step's chunk):
         the GRU (and the attention over the episode's earlier steps) see the same history."""
-        policy = tiny_policy(episode_attention_dim=attention, chunk_size=chunk, color_dim=color)
+        policy = tiny_policy(
+            episode_attention_dim=attention, chunk_size=chunk, color_dim=color, keypoint_heads=points
+        )
         batch = sequence_batch(2, 6)
         with torch.no_grad():
             whole = policy.actions(batch, 2, 6)[0][:, :, 0]

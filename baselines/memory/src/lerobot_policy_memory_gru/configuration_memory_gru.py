@@ -64,6 +64,9 @@ class MemoryGRUConfig(PreTrainedConfig):
     # Each camera's grid of local features read by attention queried with the GRU's state
     # (what the memory looks for, and where it is); 0 turns it off.
     readout_dim: int = 64
+    # Per camera, this many attention heads queried by the GRU's state whose output is the
+    # attended cells' mean image position (where the remembered thing is); 0 turns it off.
+    keypoint_heads: int = 0
     # Attention from each step over every earlier step's inputs, so that what the cue showed
     # can be looked up when the decision comes rather than carried through the delay by the
     # GRU alone; 0 turns it off.

@@ -178,6 +178,38 @@ class MemoryReadout(nn.Module):
         return torch.einsum("nk,nkd->nd", self.weights(hidden, cells), self.value(cells))
 
 
+class MemoryKeypoints(nn.Module):
+    """Where in one camera's grid the memory's object is: per head, the mean image position
+    (x, y) of the cells under attention queried by the GRU's state (a spatial soft-argmax,
+    Levine et al., 2016, that the memory steers).
+
+    The readout's values are learned features of the cells, which the head ignores while the
+    attention is still uniform, so nothing teaches the attention to look for the remembered
+    colour. Here the output is the position itself: uniform attention gives the frame's
+    centre, and the action's error moves the weight towards the cells on the side the
+    demonstrator went, from the first step.
+    """
+
+    def __init__(self, cell_dim: int, hidden_dim: int, heads: int, dim: int = 32) -> None:
+        super().__init__()
+        self.heads, self.dim = heads, dim
+        self.query = nn.Linear(hidden_dim, heads * dim)
+        self.key = nn.Linear(cell_dim, heads * dim)
+        self.scale = dim**-0.5
+
+    def weights(self, hidden: Tensor, cells: Tensor) -> Tensor:
+        """The attention of every head over the cells, ``(N, heads, K)``."""
+        n, k = cells.shape[:2]
+        query = self.query(hidden).view(n, self.heads, self.dim)
+        key = self.key(cells).view(n, k, self.heads, self.dim)
+        return (torch.einsum("nhd,nkhd->nhk", query, key) * self.scale).softmax(dim=-1)
+
+    def forward(self, hidden: Tensor, cells: Tensor, coords: Tensor) -> Tensor:
+        """``hidden (N, hidden_dim)``, ``cells (N, K, cell_dim)``, the cells' ``coords (K, 2)``
+        -> every head's (x, y), ``(N, 2 * heads)``."""
+        return torch.einsum("nhk,kc->nhc", self.weights(hidden, cells), coords).flatten(1)
+
+
 class EpisodeAttention(nn.Module):
     """Causal attention from each step over the inputs of every step so far in the episode.
 
@@ -250,11 +282,19 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             )
             step_dim += config.instruction_dim
         self.gru = nn.GRU(step_dim, config.hidden_dim, config.num_layers, batch_first=True)
+        self.episode_attention = (
+            EpisodeAttention(step_dim, config.hidden_dim, config.episode_attention_dim)
+            if config.episode_attention_dim > 0
+            else None
+        )
+        # What the cameras' grids are queried with: the GRU's state and what the episode
+        # attention recalled (the cue, looked up again rather than carried through the delay).
+        query_dim = config.hidden_dim + config.episode_attention_dim
         self.readouts = nn.ModuleDict(
             {
                 name: MemoryReadout(
                     self.encoders[name].cell_dim,
-                    config.hidden_dim,
+                    query_dim,
                     config.readout_dim,
                 )
                 for name in names
@@ -262,13 +302,18 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             if config.readout_dim > 0
             else {}
         )
-        self.episode_attention = (
-            EpisodeAttention(step_dim, config.hidden_dim, config.episode_attention_dim)
-            if config.episode_attention_dim > 0
-            else None
+        self.keypoints = nn.ModuleDict(
+            {
+                name: MemoryKeypoints(
+                    self.encoders[name].cell_dim, query_dim, config.keypoint_heads
+                )
+                for name in names
+            }
+            if config.keypoint_heads > 0
+            else {}
         )
-        head_in = config.hidden_dim + config.readout_dim * len(self.readouts)
-        head_in += config.episode_attention_dim
+        head_in = query_dim + config.readout_dim * len(self.readouts)
+        head_in += 2 * config.keypoint_heads * len(self.keypoints)
         self.head = nn.Sequential(
             nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
@@ -363,14 +408,18 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             parts.append(self._instruction(batch, b, t, parts[0].device))
         steps = torch.cat(parts, dim=-1)
         memory, hidden = self.gru(steps, hidden)
-        read = [memory]
-        for key, grid in zip(self.camera_keys, cells, strict=True):
-            readout = self.readouts[key.replace(".", "_")] if self.readouts else None
-            if readout is not None:
-                read.append(readout(memory.flatten(0, 1), grid).view(b, t, -1))
         if self.episode_attention is not None:
             recalled, past = self.episode_attention(memory, steps, past)
-            read.append(recalled)
+            memory = torch.cat([memory, recalled], dim=-1)
+        read = [memory]
+        queries = memory.flatten(0, 1)
+        for key, grid in zip(self.camera_keys, cells, strict=True):
+            name = key.replace(".", "_")
+            if self.readouts:
+                read.append(self.readouts[name](queries, grid).view(b, t, -1))
+            if self.keypoints:
+                points = self.keypoints[name](queries, grid, self.encoders[name].coords)
+                read.append(points.view(b, t, -1))
         chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
         return chunks, (hidden, past)
 
