@@ -103,7 +103,10 @@ else:
         training pass predicts for the whole sequence (the first action of each step's chunk):
         the GRU (and the attention over the episode's earlier steps) see the same history."""
         policy = tiny_policy(
-            episode_attention_dim=attention, chunk_size=chunk, color_dim=color, keypoint_heads=points
+            episode_attention_dim=attention,
+            chunk_size=chunk,
+            color_dim=color,
+            keypoint_heads=points,
         )
         batch = sequence_batch(2, 6)
         with torch.no_grad():
