@@ -40,11 +40,13 @@ if not IN_LEROBOT_ENV:
 
 else:
     import torch
+    import torch.nn.functional as F
     from lerobot.configs.policies import PreTrainedConfig
     from lerobot.utils.import_utils import register_third_party_plugins
     from lerobot_policy_memory_gru import MemoryGRUConfig, MemoryGRUPolicy
     from lerobot_policy_memory_gru import train as memory_train
     from lerobot_policy_memory_gru.modeling_memory_gru import (
+        action_bin,
         chunk_targets,
         instruction_word_buckets,
         leading_padding,
@@ -92,12 +94,12 @@ else:
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
     @pytest.mark.parametrize(
-        ("attention", "chunk", "color", "points"),
-        [(0, 1, 0, 0), (8, 1, 0, 0), (0, 4, 3, 0), (8, 2, 3, 2)],
+        ("attention", "chunk", "color", "points", "bins"),
+        [(0, 1, 0, 0, 0), (8, 1, 0, 0, 0), (0, 4, 3, 0, 0), (8, 2, 3, 2, 5)],
         ids=["gru", "gru+episode-attention", "gru+chunks+colour", "all"],
     )
     def test_acting_step_by_step_equals_the_training_pass(
-        attention: int, chunk: int, color: int, points: int
+        attention: int, chunk: int, color: int, points: int, bins: int
     ) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
         training pass predicts for the whole sequence (the first action of each step's chunk):
@@ -107,10 +109,11 @@ else:
             chunk_size=chunk,
             color_dim=color,
             keypoint_heads=points,
+            action_bins=bins,
         )
         batch = sequence_batch(2, 6)
         with torch.no_grad():
-            whole = policy.actions(batch, 2, 6)[0][:, :, 0]
+            whole = policy.decode(policy.actions(batch, 2, 6)[0])[:, :, 0]
         policy.reset()
         for t in range(6):
             step = {k: (v[:, t] if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
@@ -144,6 +147,19 @@ else:
         targets, weight = chunk_targets(values, valid, 2)
         assert targets[0, :, 0].tolist() == [0, 1, 2, 3] and targets[0, :3, 1].tolist() == [1, 2, 3]
         assert weight[0].tolist() == [[1, 1], [1, 1], [1, 0], [0, 0]]
+
+    def test_action_bins_round_trip_within_half_a_bin() -> None:
+        """An action binned and decoded is the nearest of the evenly spaced values; the loss
+        with bins is a finite cross-entropy that trains."""
+        policy = tiny_policy(action_bins=5)
+        actions = torch.tensor([-1.0, -0.6, 0.0, 0.24, 0.26, 1.0, 1.7])
+        one_hot = F.one_hot(action_bin(actions, 5), 5).float()
+        torch.testing.assert_close(
+            policy.decode(one_hot), torch.tensor([-1.0, -0.5, 0.0, 0.0, 0.5, 1.0, 1.0])
+        )
+        loss, info = policy.forward(sequence_batch(2, 5))
+        loss.backward()
+        assert torch.isfinite(loss) and "ce_loss" in info
 
     def test_instruction_buckets_are_stable_words() -> None:
         idx, off = instruction_word_buckets(["Touch the RED cube.", ""], 1024)

@@ -78,6 +78,10 @@ class MemoryGRUConfig(PreTrainedConfig):
     # cube) then weighs chunk_size times at the step where it is made, and the steps after it
     # cannot be explained by the arm's own motion alone.
     chunk_size: int = 8
+    # 0: the head regresses each action dimension (L1). N > 1: it scores N evenly spaced values
+    # of each dimension (cross-entropy; the most likely one is acted on), so that where the
+    # demonstrations go one of three ways, the policy picks one instead of their median.
+    action_bins: int = 0
     # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
     # that the steps where the demonstrator changes course count (0: a plain mean).
     keyframe_weight: float = 10.0
@@ -98,6 +102,8 @@ class MemoryGRUConfig(PreTrainedConfig):
             )
         if self.chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1, got {self.chunk_size}")
+        if self.action_bins == 1 or self.action_bins < 0:
+            raise ValueError(f"action_bins must be 0 (L1) or >= 2, got {self.action_bins}")
         if len(self.vision_channels) != 3:
             raise ValueError(f"vision_channels needs 3 entries, got {self.vision_channels}")
 

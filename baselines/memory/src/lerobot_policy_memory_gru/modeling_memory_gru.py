@@ -98,6 +98,12 @@ def chunk_targets(values: Tensor, valid: Tensor, size: int) -> tuple[Tensor, Ten
     return values[:, steps], valid[:, steps] * inside.to(valid.dtype)
 
 
+def action_bin(actions: Tensor, bins: int) -> Tensor:
+    """Normalised actions in [-1, 1] -> the index of the nearest of ``bins`` evenly spaced
+    values (long, same shape)."""
+    return ((actions.clamp(-1, 1) + 1) * ((bins - 1) / 2)).round().long()
+
+
 class CameraEncoder(nn.Module):
     """One camera's frame -> a global feature vector and a grid of local features.
 
@@ -317,7 +323,10 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         self.head = nn.Sequential(
             nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
-            nn.Linear(config.head_dim, config.action_feature.shape[0] * config.chunk_size),
+            nn.Linear(
+                config.head_dim,
+                config.action_feature.shape[0] * config.chunk_size * max(config.action_bins, 1),
+            ),
         )
         self.reset()
 
@@ -355,14 +364,26 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             pad = shift_left(pad, lead) | (
                 torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
             )
-        predicted, _ = self.actions(batch, b, t)  # (B, T, K, A)
-        valid = (~pad).to(predicted.dtype)
+        raw, _ = self.actions(batch, b, t)  # (B, T, K, A) or, with bins, (B, T, K, A, bins)
+        valid = (~pad).to(raw.dtype)
         weight = valid * keyframe_weights(batch[ACTION], valid, self.config.keyframe_weight)
         targets, target_weight = chunk_targets(batch[ACTION], weight, self.config.chunk_size)
-        error = (predicted - targets).abs().mean(dim=-1)  # (B, T, K)
+        if self.config.action_bins > 0:
+            error = F.cross_entropy(
+                raw.movedim(-1, 1), action_bin(targets, self.config.action_bins), reduction="none"
+            ).mean(dim=-1)  # (B, T, K)
+        else:
+            error = (raw - targets).abs().mean(dim=-1)  # (B, T, K)
         loss = (error * target_weight).sum() / target_weight.sum().clamp(min=1e-6)
-        l1 = (error[:, :, 0] * valid).sum() / valid.sum().clamp(min=1.0)
-        return loss, {"l1_loss": l1.item()}
+        first = (error[:, :, 0] * valid).sum() / valid.sum().clamp(min=1.0)
+        return loss, {"ce_loss" if self.config.action_bins > 0 else "l1_loss": first.item()}
+
+    def decode(self, raw: Tensor) -> Tensor:
+        """The head's output -> actions ``(..., A)`` (normalised): itself under L1, the most
+        likely bin's centre with ``action_bins``."""
+        if self.config.action_bins <= 0:
+            return raw
+        return raw.argmax(dim=-1).to(raw.dtype) * (2.0 / (self.config.action_bins - 1)) - 1.0
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -374,8 +395,8 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 "same episode; call reset() when the set of episodes changes"
             )
         step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
-        predicted, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
-        return predicted[:, :, 0]
+        raw, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
+        return self.decode(raw)[:, :, 0]
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -421,6 +442,8 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 points = self.keypoints[name](queries, grid, self.encoders[name].coords)
                 read.append(points.view(b, t, -1))
         chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
+        if self.config.action_bins > 0:
+            chunks = chunks.unflatten(-1, (-1, self.config.action_bins))
         return chunks, (hidden, past)
 
     def _instruction(
