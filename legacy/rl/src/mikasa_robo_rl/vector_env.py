@@ -60,11 +60,23 @@ class SubEnvSpec:
     max_steps_per_video: int | None = None
 
     def make(self, index: int = 0) -> gym.Env:
-        """Sub-env ``index``: ``gym.make`` on the CPU sim, the RL chain (the VLA chain for a
-        VLA id), ``RecordEpisode`` for sub-env 0 when ``video_dir`` is set,
-        ``ManiSkillVectorEnv``."""
+        """Sub-env ``index``: `make_single` in ManiSkill's ``ManiSkillVectorEnv`` (a batch of
+        one, torch tensors, episode metrics)."""
         from mani_skill.vector.wrappers.gymnasium import ManiSkillVectorEnv
 
+        env = self.make_single(index)
+        try:
+            return ManiSkillVectorEnv(
+                env, 1, auto_reset=False, ignore_terminations=self.ignore_terminations, record_metrics=True
+            )
+        except BaseException:
+            env.close()
+            raise
+
+    def make_single(self, index: int = 0) -> gym.Env:
+        """Sub-env ``index`` unbatched by a vector wrapper: ``gym.make`` on the CPU sim, the RL
+        chain (the VLA chain for a VLA id), ``RecordEpisode`` for sub-env 0 when
+        ``video_dir`` is set."""
         from mikasa_robo_rl.manifest import trainable_horizon
         from mikasa_robo_rl.wrappers import (
             apply_rl_wrappers,
@@ -115,9 +127,7 @@ class SubEnvSpec:
                 env = RecordEpisode(env, self.video_dir, save_trajectory=self.save_trajectory,
                                     trajectory_name="trajectory", max_steps_per_video=self.max_steps_per_video,
                                     video_fps=30, avoid_overwriting_video=True)
-            return ManiSkillVectorEnv(
-                env, 1, auto_reset=False, ignore_terminations=self.ignore_terminations, record_metrics=True
-            )
+            return env
         except BaseException:
             env.close()
             raise
