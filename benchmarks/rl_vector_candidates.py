@@ -7,6 +7,9 @@ after ``--warmup`` (the batch as torch tensors in the trainer, as the trainers u
 * ``pickle-queues``: the release's ``CpuVectorEnv`` (``legacy/rl``): ``--workers``
   processes, each holding ``num_envs / workers`` sub-envs it steps one after another;
   results converted to numpy and pickled through a queue, stacked by the trainer.
+* ``shared-queues``: the same with ``shared_memory=True``: the workers write observations
+  into shared memory, only rewards, flags and finished episodes' final observations go
+  through the queues; several sub-envs per worker, as before.
 * ``gymnasium-shm``: Gymnasium's ``AsyncVectorEnv`` with ``shared_memory=True`` over
   ManiSkill's ``CPUGymWrapper``: one process per sub-env, observations written by the
   workers into shared memory (no pickling of image arrays); the trainer wraps the shared
@@ -15,7 +18,7 @@ after ``--warmup`` (the batch as torch tensors in the trainer, as the trainers u
   pipes), to see what the shared memory alone is worth.
 
 Gymnasium's design holds one sub-env per process, so its candidates always start
-``--num-envs`` processes; ``pickle-queues`` starts ``--workers``. Every candidate builds the
+``--num-envs`` processes; the two ``-queues`` candidates start ``--workers``. Every candidate builds the
 same sub-env (``SubEnvSpec.make_single``: the RL wrapper chain on the CPU sim) and resets it
 with the same seeds; what differs is how the batch travels.
 
@@ -39,7 +42,7 @@ import numpy as np
 import torch
 from ppo_throughput import write_figures  # this directory's PPO throughput script
 
-CANDIDATES = ("pickle-queues", "gymnasium-shm", "gymnasium-pipes")
+CANDIDATES = ("pickle-queues", "shared-queues", "gymnasium-shm", "gymnasium-pipes")
 
 
 def make_cpu_gym_env(spec: Any, index: int) -> gym.Env:
@@ -101,10 +104,10 @@ class GymnasiumBatch:
 class QueuesBatch:
     """The release's ``CpuVectorEnv``."""
 
-    def __init__(self, spec: Any, num_envs: int, workers: int, device: torch.device) -> None:
+    def __init__(self, spec: Any, num_envs: int, workers: int, device: torch.device, shared_memory: bool) -> None:
         from mikasa_robo_rl.vector_env import CpuVectorEnv
 
-        self.env = CpuVectorEnv(spec, num_envs, workers=workers, device=device)
+        self.env = CpuVectorEnv(spec, num_envs, workers=workers, device=device, shared_memory=shared_memory)
         self.single_action_space = self.env.single_action_space
 
     def reset(self, seed: int) -> Any:
@@ -124,8 +127,8 @@ def measure(candidate: str, env_id: str, mode: str, num_envs: int, workers: int,
 
     spec, device = SubEnvSpec(env_id, mode), torch.device("cpu")
     t0 = time.perf_counter()
-    if candidate == "pickle-queues":
-        batch: Any = QueuesBatch(spec, num_envs, workers, device)
+    if candidate.endswith("-queues"):
+        batch: Any = QueuesBatch(spec, num_envs, workers, device, candidate == "shared-queues")
     else:
         batch = GymnasiumBatch(spec, num_envs, candidate == "gymnasium-shm", device)
     try:
@@ -141,7 +144,7 @@ def measure(candidate: str, env_id: str, mode: str, num_envs: int, workers: int,
         elapsed = time.perf_counter() - t0
     finally:
         batch.close()
-    processes = workers if candidate == "pickle-queues" else num_envs
+    processes = min(workers, num_envs) if candidate.endswith("-queues") else num_envs
     return {
         "candidate": candidate,
         "mode": mode,
@@ -160,7 +163,7 @@ def main() -> None:
     parser.add_argument("--candidates", default=",".join(CANDIDATES), help=f"comma-separated, of {', '.join(CANDIDATES)}")
     parser.add_argument("--num-envs", type=int, default=8)
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                        help="pickle-queues' worker processes (the Gymnasium candidates start one per env)")
+                        help="the -queues candidates' worker processes (Gymnasium's start one per env)")
     parser.add_argument("--steps", type=int, default=100, help="timed batched steps")
     parser.add_argument("--warmup", type=int, default=10, help="untimed batched steps first")
     parser.add_argument("--json", default=None, help="also write the figures here")

@@ -54,6 +54,7 @@ def _rollout(env: CpuVectorEnv, steps: int) -> tuple[dict, list[dict]]:
         assert terminated.dtype == torch.bool and not terminated.any()  # ignore_terminations
         if "final_info" in info:
             finals.append({k: v.clone() for k, v in info["final_info"]["episode"].items()})
+            finals[-1]["final_state"] = info["final_observation"]["state"].clone()
             assert info["_final_info"].all() and truncated.all()
             assert info["final_observation"]["state"].shape == (env.num_envs, 35)
     return first, finals
@@ -66,13 +67,18 @@ def test_vector_env_batches_sub_envs_and_matches_across_worker_counts():
         first_inline, finals_inline = _rollout(inline, 180)
     with CpuVectorEnv(spec, 3, workers=2) as pooled:
         first_pooled, finals_pooled = _rollout(pooled, 180)
+    # The observations through shared memory instead of the queues: the same batches.
+    with CpuVectorEnv(spec, 3, workers=2, shared_memory=True) as shared:
+        first_shared, finals_shared = _rollout(shared, 180)
     assert first_inline["state"].shape == (3, 35) and first_inline["state"].dtype == torch.float32
     assert torch.equal(first_inline["state"], first_pooled["state"])
+    assert torch.equal(first_inline["state"], first_shared["state"])
     # Three episodes each, the auto-reset ones too, identical however the sub-envs are spread.
-    assert len(finals_inline) == len(finals_pooled) == 3
-    for inline_final, pooled_final in zip(finals_inline, finals_pooled, strict=True):
-        for key in ("success_once", "return", "episode_len"):
+    assert len(finals_inline) == len(finals_pooled) == len(finals_shared) == 3
+    for inline_final, pooled_final, shared_final in zip(finals_inline, finals_pooled, finals_shared, strict=True):
+        for key in ("success_once", "return", "episode_len", "final_state"):
             assert torch.equal(inline_final[key], pooled_final[key])
+            assert torch.equal(inline_final[key], shared_final[key])
     assert finals_inline[0]["episode_len"].tolist() == [60, 60, 60]
 
 

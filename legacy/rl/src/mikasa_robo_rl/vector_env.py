@@ -144,6 +144,66 @@ def _to_numpy(tree: Any) -> Any:
     return tree
 
 
+def _leaves(tree: Any, path: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], Any]]:
+    """The arrays of a (nested) dict observation with their key paths."""
+    if isinstance(tree, Mapping):
+        return [leaf for k, v in tree.items() for leaf in _leaves(v, (*path, k))]
+    return [(path, tree)]
+
+
+class SharedObservations:
+    """Every sub-env's observation in shared memory: leaf ``path`` -> ``(num_envs, *shape)``.
+
+    The trainer creates the blocks (``layout``: path -> (shape of one sub-env's leaf without
+    its batch of 1, dtype)); a worker attaches by their ``names`` and writes its sub-envs'
+    rows, so image arrays never go through a pipe; the trainer reads the batch once.
+    """
+
+    def __init__(self, layout: dict[tuple[str, ...], tuple[tuple[int, ...], str]], num_envs: int,
+                 names: dict[tuple[str, ...], str] | None = None) -> None:
+        from multiprocessing.shared_memory import SharedMemory
+
+        self.layout, self.owner = layout, names is None
+        self.blocks: dict[tuple[str, ...], Any] = {}
+        self.arrays: dict[tuple[str, ...], np.ndarray] = {}
+        for path, (shape, dtype) in layout.items():
+            size = max(1, int(np.prod((num_envs, *shape))) * np.dtype(dtype).itemsize)
+            block = SharedMemory(create=True, size=size) if names is None else SharedMemory(name=names[path])
+            self.blocks[path] = block
+            self.arrays[path] = np.ndarray((num_envs, *shape), dtype=dtype, buffer=block.buf)
+
+    @property
+    def names(self) -> dict[tuple[str, ...], str]:
+        return {path: block.name for path, block in self.blocks.items()}
+
+    def write(self, index: int, obs: Any) -> None:
+        """Sub-env ``index``'s observation (numpy, batch of 1) into its rows."""
+        for path, value in _leaves(obs):
+            self.arrays[path][index] = value[0]
+
+    def read(self, device: torch.device) -> Any:
+        """The whole batch as a tensor tree on ``device``, copied out of the shared blocks."""
+        out: dict[str, Any] = {}
+        for path, array in self.arrays.items():
+            tensor = torch.from_numpy(array)
+            tensor = tensor.clone() if device.type == "cpu" else tensor.to(device)
+            if not path:  # the observation is one array, not a dict
+                return tensor
+            node = out
+            for key in path[:-1]:
+                node = node.setdefault(key, {})
+            node[path[-1]] = tensor
+        return out
+
+    def close(self) -> None:
+        self.arrays = {}
+        for block in self.blocks.values():
+            block.close()
+            if self.owner:
+                block.unlink()
+        self.blocks = {}
+
+
 class _SubEnvs:
     """A worker's state: its sub-envs; jobs ``("reset", seeds)`` and ``("step", actions)``.
 
@@ -153,9 +213,20 @@ class _SubEnvs:
     would depend on how the sub-envs are spread over processes.
     """
 
-    def __init__(self, spec: SubEnvSpec, count: int, first_index: int = 0) -> None:
+    def __init__(self, spec: SubEnvSpec, count: int, first_index: int = 0, shared: Any = None) -> None:
         self.envs = [spec.make(first_index + i) for i in range(count)]
         self.seeders = [np.random.RandomState() for _ in range(count)]
+        self.first_index = first_index
+        # (layout, num_envs, names): observations go into the trainer's shared blocks
+        self.shared = None if shared is None else SharedObservations(*shared)
+
+    def _send(self, i: int, obs: Any) -> Any:
+        """Sub-env ``i``'s observation for the trainer: written to shared memory (None goes
+        back), or as numpy arrays."""
+        if self.shared is None:
+            return _to_numpy(obs)
+        self.shared.write(self.first_index + i, _to_numpy(obs))
+        return None
 
     def _reset(self, i: int, seed: int | None) -> tuple[Any, Any]:
         if seed is None:
@@ -167,7 +238,11 @@ class _SubEnvs:
     def run(self, job: tuple[str, Any]) -> list[Any]:
         kind, payload = job
         if kind == "reset":
-            return [_to_numpy(self._reset(i, seed)) for i, seed in enumerate(payload)]
+            out = []
+            for i, seed in enumerate(payload):
+                obs, info = self._reset(i, seed)
+                out.append((self._send(i, obs), _to_numpy(info)))
+            return out
         if kind == "step":
             out = []
             for i, (env, action) in enumerate(zip(self.envs, payload, strict=True)):
@@ -178,29 +253,32 @@ class _SubEnvs:
                     kept = {"final_observation": obs, "final_info": {"episode": info["episode"]},
                             "_final_info": terminated | truncated}
                     obs, _ = self._reset(i, None)
-                out.append(_to_numpy((obs, reward, terminated, truncated, kept)))
+                out.append((self._send(i, obs), *_to_numpy((reward, terminated, truncated, kept))))
             return out
         raise ValueError(f"unknown job {kind!r}")
 
     def close(self) -> None:
         for env in self.envs:
             env.close()
+        if self.shared is not None:
+            self.shared.close()
 
 
-def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int) -> _SubEnvs:
+def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int, shared: Any = None) -> _SubEnvs:
     from mikasa_envs.workers import quiet_worker
 
     quiet_worker()
     import mikasa_robo_rl  # noqa: F401  (registers the RL ids in the spawned interpreter)
 
-    return _SubEnvs(spec, count, first_index)
+    return _SubEnvs(spec, count, first_index, shared)
 
 
-def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, first_index: int, inbox: Any, outbox: Any) -> None:
+def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, first_index: int, inbox: Any, outbox: Any,
+                 shared: Any = None) -> None:
     from mikasa_envs.workers import serve_jobs, use_one_gpu
 
     use_one_gpu(worker_id)  # a CUDA context on one GPU, not on each (its docstring says why)
-    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index))
+    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index, shared))
 
 
 def _stack(parts: list[Any], device: torch.device) -> Any:
@@ -209,6 +287,16 @@ def _stack(parts: list[Any], device: torch.device) -> Any:
     if isinstance(first, Mapping):
         return {k: _stack([p[k] for p in parts], device) for k in first}
     return torch.from_numpy(np.concatenate([np.asarray(p) for p in parts], axis=0)).to(device)
+
+
+def _replace_rows(batch: Any, rows: dict[int, Any]) -> Any:
+    """A copy of a batched tensor tree with row i replaced by ``rows[i]`` (numpy, batch of 1)."""
+    if isinstance(batch, Mapping):
+        return {k: _replace_rows(v, {i: row[k] for i, row in rows.items()}) for k, v in batch.items()}
+    out = batch.clone()
+    for i, row in rows.items():
+        out[i] = torch.from_numpy(np.asarray(row[0])).to(out.device)
+    return out
 
 
 class CpuVectorEnv:
@@ -220,11 +308,14 @@ class CpuVectorEnv:
     sub-env resets itself and ``info`` then holds ``final_observation``, ``final_info``
     (with ``episode`` metrics) and the mask ``_final_info``. ``single_observation_space`` /
     ``single_action_space`` are a sub-env's. ``workers=0`` runs the sub-envs in this
-    process (tests, debugging).
+    process (tests, debugging). ``shared_memory=True``: the workers write observations into
+    `SharedObservations` instead of pickling them through the queues (the rest, rewards,
+    flags and a finished episode's final observation, still goes through them).
     """
 
     def __init__(
-        self, spec: SubEnvSpec, num_envs: int, workers: int | None = None, device: str | torch.device = "cpu"
+        self, spec: SubEnvSpec, num_envs: int, workers: int | None = None, device: str | torch.device = "cpu",
+        shared_memory: bool = False,
     ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -237,6 +328,11 @@ class CpuVectorEnv:
         self.single_observation_space = probe.single_observation_space
         self.single_action_space = probe.single_action_space
         self.max_episode_steps = find_max_episode_steps_value(probe)
+        self._shared: SharedObservations | None = None
+        if shared_memory and workers > 0:
+            sample = _to_numpy(probe.reset(seed=0)[0])
+            layout = {path: (tuple(v.shape[1:]), v.dtype.str) for path, v in _leaves(sample)}
+            self._shared = SharedObservations(layout, self.num_envs)
         probe.close()
         self._inline: _SubEnvs | None = None
         self._processes: list[Any] = []
@@ -246,12 +342,13 @@ class CpuVectorEnv:
             return
         workers = min(workers, num_envs)
         self._counts = [num_envs // workers + (w < num_envs % workers) for w in range(workers)]
+        shared = None if self._shared is None else (self._shared.layout, self.num_envs, self._shared.names)
         ctx = mp.get_context("spawn")
         self._outbox = ctx.Queue()
         self._inboxes = [ctx.Queue() for _ in range(workers)]
         self._processes = [
-            ctx.Process(target=_worker_main, args=(w, spec, n, sum(self._counts[:w]), inbox, self._outbox), daemon=True,
-                        name=f"mikasa-rl-env-{w}")
+            ctx.Process(target=_worker_main, args=(w, spec, n, sum(self._counts[:w]), inbox, self._outbox, shared),
+                        daemon=True, name=f"mikasa-rl-env-{w}")
             for w, (n, inbox) in enumerate(zip(self._counts, self._inboxes, strict=True))
         ]
         for p in self._processes:
@@ -298,7 +395,13 @@ class CpuVectorEnv:
 
         seeds = [None if seed is None else episode_seed(seed, i, self.num_envs) for i in range(self.num_envs)]
         results = self._run_all("reset", seeds)
-        return _stack([obs for obs, _ in results], self.device), {}
+        return self._observations(results), {}
+
+    def _observations(self, results: list[Any]) -> Any:
+        """The batch of observations: from the shared blocks, or stacked from the results."""
+        if self._shared is not None:
+            return self._shared.read(self.device)
+        return _stack([r[0] for r in results], self.device)
 
     def step(
         self, actions: torch.Tensor | np.ndarray
@@ -312,15 +415,15 @@ class CpuVectorEnv:
         if not np.isfinite(actions).all():
             raise ValueError("actions contain NaN or inf")
         results = self._run_all("step", list(actions))
-        obs = _stack([r[0] for r in results], self.device)
+        obs = self._observations(results)
         reward, terminated, truncated = (_stack([r[k] for r in results], self.device) for k in (1, 2, 3))
         info: dict[str, Any] = {}
         finished = [("_final_info" in r[4]) and bool(np.asarray(r[4]["_final_info"]).any()) for r in results]
         if any(finished):
             # Sub-envs that did not finish contribute their current observation (masked out
             # by ``_final_info``), as ManiSkillVectorEnv's batch does.
-            info["final_observation"] = _stack(
-                [r[4]["final_observation"] if f else r[0] for r, f in zip(results, finished, strict=True)], self.device
+            info["final_observation"] = _replace_rows(
+                obs, {i: r[4]["final_observation"] for i, (r, f) in enumerate(zip(results, finished, strict=True)) if f}
             )
             # Metrics exist only for finished sub-envs; the others get zeros (masked out).
             template = next(r[4]["final_info"]["episode"] for r, f in zip(results, finished, strict=True) if f)
@@ -346,6 +449,9 @@ class CpuVectorEnv:
                 inbox.put(None)
             stop_processes(self._processes, wait_s=3)
             self._processes = []
+        if self._shared is not None:
+            self._shared.close()
+            self._shared = None
 
     def __enter__(self) -> CpuVectorEnv:
         return self
