@@ -185,7 +185,7 @@ def main() -> None:
             print(f"{candidate:<16} {mode:<11} {row['processes']:>9} {row['env_steps_per_s']:>12} "
                   f"{row['batched_step_ms']:>8} {row['start_s']:>8}", flush=True)
     if args.json:
-        write_figures(args.json, {"env_id": args.env_id, "cpu_cores": os.cpu_count(), "rows": rows})
+        write_figures(args.json, args.env_id, rows)
 
 
 if __name__ == "__main__":
