@@ -10,6 +10,9 @@ after ``--warmup`` (the batch as torch tensors in the trainer, as the trainers u
 * ``shared-queues``: the same with ``shared_memory=True``: the workers write observations
   into shared memory, only rewards, flags and finished episodes' final observations go
   through the queues; several sub-envs per worker, as before.
+* ``shared-threads``: the same, each worker stepping its sub-envs in threads of their own
+  and rendering their cameras in one GPU pass per step (``render_together=True``; with CPU
+  rendering the threads only overlap what releases the GIL).
 * ``gymnasium-shm``: Gymnasium's ``AsyncVectorEnv`` with ``shared_memory=True`` over
   ManiSkill's ``CPUGymWrapper``: one process per sub-env, observations written by the
   workers into shared memory (no pickling of image arrays); the trainer wraps the shared
@@ -18,7 +21,7 @@ after ``--warmup`` (the batch as torch tensors in the trainer, as the trainers u
   pipes), to see what the shared memory alone is worth.
 
 Gymnasium's design holds one sub-env per process, so its candidates always start
-``--num-envs`` processes; the two ``-queues`` candidates start ``--workers``. Every candidate builds the
+``--num-envs`` processes; the others start ``--workers``. Every candidate builds the
 same sub-env (``SubEnvSpec.make_single``: the RL wrapper chain on the CPU sim) and resets it
 with the same seeds; what differs is how the batch travels.
 
@@ -42,7 +45,7 @@ import numpy as np
 import torch
 from ppo_throughput import write_figures  # this directory's PPO throughput script
 
-CANDIDATES = ("pickle-queues", "shared-queues", "gymnasium-shm", "gymnasium-pipes")
+CANDIDATES = ("pickle-queues", "shared-queues", "shared-threads", "gymnasium-shm", "gymnasium-pipes")
 
 
 def make_cpu_gym_env(spec: Any, index: int) -> gym.Env:
@@ -104,10 +107,12 @@ class GymnasiumBatch:
 class QueuesBatch:
     """The release's ``CpuVectorEnv``."""
 
-    def __init__(self, spec: Any, num_envs: int, workers: int, device: torch.device, shared_memory: bool) -> None:
+    def __init__(self, spec: Any, num_envs: int, workers: int, device: torch.device, shared_memory: bool,
+                 render_together: bool) -> None:
         from mikasa_robo_rl.vector_env import CpuVectorEnv
 
-        self.env = CpuVectorEnv(spec, num_envs, workers=workers, device=device, shared_memory=shared_memory)
+        self.env = CpuVectorEnv(spec, num_envs, workers=workers, device=device, shared_memory=shared_memory,
+                                render_together=render_together)
         self.single_action_space = self.env.single_action_space
 
     def reset(self, seed: int) -> Any:
@@ -127,8 +132,9 @@ def measure(candidate: str, env_id: str, mode: str, num_envs: int, workers: int,
 
     spec, device = SubEnvSpec(env_id, mode), torch.device("cpu")
     t0 = time.perf_counter()
-    if candidate.endswith("-queues"):
-        batch: Any = QueuesBatch(spec, num_envs, workers, device, candidate == "shared-queues")
+    if not candidate.startswith("gymnasium"):
+        batch: Any = QueuesBatch(spec, num_envs, workers, device, candidate != "pickle-queues",
+                                 candidate == "shared-threads")
     else:
         batch = GymnasiumBatch(spec, num_envs, candidate == "gymnasium-shm", device)
     try:
@@ -144,7 +150,7 @@ def measure(candidate: str, env_id: str, mode: str, num_envs: int, workers: int,
         elapsed = time.perf_counter() - t0
     finally:
         batch.close()
-    processes = min(workers, num_envs) if candidate.endswith("-queues") else num_envs
+    processes = num_envs if candidate.startswith("gymnasium") else min(workers, num_envs)
     return {
         "candidate": candidate,
         "mode": mode,
@@ -163,7 +169,7 @@ def main() -> None:
     parser.add_argument("--candidates", default=",".join(CANDIDATES), help=f"comma-separated, of {', '.join(CANDIDATES)}")
     parser.add_argument("--num-envs", type=int, default=8)
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                        help="the -queues candidates' worker processes (Gymnasium's start one per env)")
+                        help="worker processes of the CpuVectorEnv candidates (Gymnasium's start one per env)")
     parser.add_argument("--steps", type=int, default=100, help="timed batched steps")
     parser.add_argument("--warmup", type=int, default=10, help="untimed batched steps first")
     parser.add_argument("--json", default=None, help="also write the figures here")

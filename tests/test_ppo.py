@@ -67,8 +67,9 @@ def test_vector_env_batches_sub_envs_and_matches_across_worker_counts():
         first_inline, finals_inline = _rollout(inline, 180)
     with CpuVectorEnv(spec, 3, workers=2) as pooled:
         first_pooled, finals_pooled = _rollout(pooled, 180)
-    # The observations through shared memory instead of the queues: the same batches.
-    with CpuVectorEnv(spec, 3, workers=2, shared_memory=True) as shared:
+    # The observations through shared memory instead of the queues, the three sub-envs of
+    # one worker stepped in threads of their own: the same batches.
+    with CpuVectorEnv(spec, 3, workers=1, shared_memory=True, render_together=True) as shared:
         first_shared, finals_shared = _rollout(shared, 180)
     assert first_inline["state"].shape == (3, 35) and first_inline["state"].dtype == torch.float32
     assert torch.equal(first_inline["state"], first_pooled["state"])

@@ -12,7 +12,9 @@ wrapped in ManiSkill's own ``ManiSkillVectorEnv`` (``ignore_terminations``,
 this module resets finished sub-envs with seeds of their own (``final_observation``,
 ``final_info``, ``_final_info`` as ManiSkillVectorEnv's auto-reset reports them), ships the
 pieces between processes and stacks them. A worker process holds
-``num_envs / workers`` sub-envs and steps them one after another.
+``num_envs / workers`` sub-envs and steps them one after another, or each in a thread of its
+own with their cameras rendered in one GPU pass (``render_together``); observations travel
+pickled through queues, or through shared memory (``shared_memory``).
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
@@ -213,7 +216,14 @@ class _SubEnvs:
     would depend on how the sub-envs are spread over processes.
     """
 
-    def __init__(self, spec: SubEnvSpec, count: int, first_index: int = 0, shared: Any = None) -> None:
+    def __init__(self, spec: SubEnvSpec, count: int, first_index: int = 0, shared: Any = None,
+                 render_together: bool = False) -> None:
+        self.threads: ThreadPoolExecutor | None = None
+        if render_together and count > 1:
+            from mikasa_envs.render_batcher import install_batcher
+
+            install_batcher()
+            self.threads = ThreadPoolExecutor(count, thread_name_prefix="mikasa-rl-sub-env")
         self.envs = [spec.make(first_index + i) for i in range(count)]
         self.seeders = [np.random.RandomState() for _ in range(count)]
         self.first_index = first_index
@@ -235,50 +245,66 @@ class _SubEnvs:
             self.seeders[i] = np.random.RandomState(seed)
         return self.envs[i].reset(seed=seed)
 
+    def _reset_one(self, i: int, seed: int | None) -> tuple[Any, Any]:
+        obs, info = self._reset(i, seed)
+        return self._send(i, obs), _to_numpy(info)
+
+    def _step_one(self, i: int, action: np.ndarray) -> tuple[Any, ...]:
+        obs, reward, terminated, truncated, info = self.envs[i].step(torch.as_tensor(action[None]))
+        # Only what the trainers read crosses back: final observation and metrics.
+        kept = {}
+        if bool((terminated | truncated).any()):
+            kept = {"final_observation": obs, "final_info": {"episode": info["episode"]},
+                    "_final_info": terminated | truncated}
+            obs, _ = self._reset(i, None)
+        return (self._send(i, obs), *_to_numpy((reward, terminated, truncated, kept)))
+
+    def _each(self, fn: Callable[[int, Any], Any], payload: list[Any]) -> list[Any]:
+        """``fn(i, payload[i])`` for every sub-env: one after another, or with ``threads``
+        each in its own thread, rendering together (``mikasa_envs.render_batcher``)."""
+        if self.threads is None:
+            return [fn(i, p) for i, p in enumerate(payload)]
+        from mikasa_envs.render_batcher import participating
+
+        def run_one(i: int) -> Any:
+            with participating():
+                return fn(i, payload[i])
+
+        return list(self.threads.map(run_one, range(len(payload))))
+
     def run(self, job: tuple[str, Any]) -> list[Any]:
         kind, payload = job
         if kind == "reset":
-            out = []
-            for i, seed in enumerate(payload):
-                obs, info = self._reset(i, seed)
-                out.append((self._send(i, obs), _to_numpy(info)))
-            return out
+            return self._each(self._reset_one, payload)
         if kind == "step":
-            out = []
-            for i, (env, action) in enumerate(zip(self.envs, payload, strict=True)):
-                obs, reward, terminated, truncated, info = env.step(torch.as_tensor(action[None]))
-                # Only what the trainers read crosses back: final observation and metrics.
-                kept = {}
-                if bool((terminated | truncated).any()):
-                    kept = {"final_observation": obs, "final_info": {"episode": info["episode"]},
-                            "_final_info": terminated | truncated}
-                    obs, _ = self._reset(i, None)
-                out.append((self._send(i, obs), *_to_numpy((reward, terminated, truncated, kept))))
-            return out
+            return self._each(self._step_one, payload)
         raise ValueError(f"unknown job {kind!r}")
 
     def close(self) -> None:
         for env in self.envs:
             env.close()
+        if self.threads is not None:
+            self.threads.shutdown()
         if self.shared is not None:
             self.shared.close()
 
 
-def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int, shared: Any = None) -> _SubEnvs:
+def _start_sub_envs(spec: SubEnvSpec, count: int, first_index: int, shared: Any = None,
+                    render_together: bool = False) -> _SubEnvs:
     from mikasa_envs.workers import quiet_worker
 
     quiet_worker()
     import mikasa_robo_rl  # noqa: F401  (registers the RL ids in the spawned interpreter)
 
-    return _SubEnvs(spec, count, first_index, shared)
+    return _SubEnvs(spec, count, first_index, shared, render_together)
 
 
 def _worker_main(worker_id: int, spec: SubEnvSpec, count: int, first_index: int, inbox: Any, outbox: Any,
-                 shared: Any = None) -> None:
+                 shared: Any = None, render_together: bool = False) -> None:
     from mikasa_envs.workers import serve_jobs, use_one_gpu
 
     use_one_gpu(worker_id)  # a CUDA context on one GPU, not on each (its docstring says why)
-    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index, shared))
+    serve_jobs(worker_id, inbox, outbox, partial(_start_sub_envs, spec, count, first_index, shared, render_together))
 
 
 def _stack(parts: list[Any], device: torch.device) -> Any:
@@ -315,7 +341,7 @@ class CpuVectorEnv:
 
     def __init__(
         self, spec: SubEnvSpec, num_envs: int, workers: int | None = None, device: str | torch.device = "cpu",
-        shared_memory: bool = False,
+        shared_memory: bool = False, render_together: bool = False,
     ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -347,7 +373,8 @@ class CpuVectorEnv:
         self._outbox = ctx.Queue()
         self._inboxes = [ctx.Queue() for _ in range(workers)]
         self._processes = [
-            ctx.Process(target=_worker_main, args=(w, spec, n, sum(self._counts[:w]), inbox, self._outbox, shared),
+            ctx.Process(target=_worker_main,
+                        args=(w, spec, n, sum(self._counts[:w]), inbox, self._outbox, shared, render_together),
                         daemon=True, name=f"mikasa-rl-env-{w}")
             for w, (n, inbox) in enumerate(zip(self._counts, self._inboxes, strict=True))
         ]
