@@ -33,13 +33,14 @@ MODE_FLAGS = {
 }
 
 
-def env_only(env_id: str, mode: str, num_envs: int, workers: int, steps: int) -> dict:
-    """Steps/s of the batched env alone with random actions (after one warm-up step)."""
+def env_only(env_id: str, mode: str, num_envs: int, workers: int, steps: int, options: dict) -> dict:
+    """Steps/s of the batched env alone with random actions (after one warm-up step);
+    ``options``: ``CpuVectorEnv``'s ``shared_memory`` / ``render_together``."""
     import torch
     from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
     t0 = time.perf_counter()
-    with CpuVectorEnv(SubEnvSpec(env_id, mode), num_envs, workers=workers) as env:
+    with CpuVectorEnv(SubEnvSpec(env_id, mode), num_envs, workers=workers, **options) as env:
         startup = time.perf_counter() - t0
         env.reset(seed=0)
         low, high = (torch.as_tensor(b) for b in (env.single_action_space.low, env.single_action_space.high))
@@ -51,12 +52,14 @@ def env_only(env_id: str, mode: str, num_envs: int, workers: int, steps: int) ->
     return dict(env_steps_per_s=num_envs * steps / wall, startup_s=startup)
 
 
-def trainer(env_id: str, mode: str, num_envs: int, workers: int, iterations: int, num_steps: int) -> dict:
+def trainer(env_id: str, mode: str, num_envs: int, workers: int, iterations: int, num_steps: int,
+            options: dict) -> dict:
     """Run the trainer for ``iterations`` and read its per-iteration figures."""
     cmd = [sys.executable, str(TRAINER), "--env-id", env_id, *MODE_FLAGS[mode], "--num-envs", str(num_envs),
            "--num-steps", str(num_steps), "--total-timesteps", str(iterations * num_envs * num_steps),
            "--num-minibatches", "8", "--num-eval-envs", "1", "--num-eval-steps", "1", "--eval-freq", "1000000",
-           "--num-workers", str(workers), "--no-capture-video", "--no-save-model"]
+           "--num-workers", str(workers), "--no-capture-video", "--no-save-model",
+           *[f"--env-{key.replace('_', '-')}" for key, on in options.items() if on]]
     out = subprocess.run(cmd, capture_output=True, text=True, cwd=os.environ.get("TMPDIR", "/tmp"))
     if out.returncode != 0:
         raise RuntimeError(f"trainer failed:\n{out.stderr[-3000:]}")
@@ -91,8 +94,13 @@ def main() -> None:
     parser.add_argument("--env-steps", type=int, default=60, help="batched steps timed for the env alone")
     parser.add_argument("--iterations", type=int, default=3, help="trainer iterations (the first is not counted)")
     parser.add_argument("--num-steps", type=int, default=60, help="trainer rollout length")
+    parser.add_argument("--shared-memory", action="store_true",
+                        help="env workers write observations into shared memory (CpuVectorEnv's shared_memory)")
+    parser.add_argument("--render-together", action="store_true",
+                        help="each env worker renders its envs in one GPU pass (CpuVectorEnv's render_together)")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
+    options = dict(shared_memory=args.shared_memory, render_together=args.render_together)
     modes = args.modes.split(",")
     for mode in modes:
         if mode not in MODE_FLAGS:
@@ -101,9 +109,9 @@ def main() -> None:
 
     rows = []
     for mode in modes:
-        alone = env_only(args.env_id, mode, num_envs, args.workers, args.env_steps)
-        train = trainer(args.env_id, mode, num_envs, args.workers, args.iterations, args.num_steps)
-        rows.append(dict(mode=mode, num_envs=num_envs, workers=args.workers, **alone, **train))
+        alone = env_only(args.env_id, mode, num_envs, args.workers, args.env_steps, options)
+        train = trainer(args.env_id, mode, num_envs, args.workers, args.iterations, args.num_steps, options)
+        rows.append(dict(mode=mode, num_envs=num_envs, workers=args.workers, **options, **alone, **train))
         print(f"{mode:11s} envs {num_envs:4d} workers {args.workers:3d} | env alone {alone['env_steps_per_s']:7.0f} st/s "
               f"| training {train['steady_sps']:7.0f} st/s (rollout {100 * train['rollout_share']:.0f} %, "
               f"update {100 * train['update_share']:.0f} %)", flush=True)

@@ -136,6 +136,10 @@ class Args:
     reward_mode: str = "normalized_dense"
     num_workers: int | None = None
     """env worker processes (default: one per CPU core, at most one per env); 0 = in this process"""
+    env_shared_memory: bool = False
+    """env workers write observations into shared memory instead of pickling them"""
+    env_render_together: bool = False
+    """each env worker steps its envs in threads and renders their cameras in one GPU pass"""
     resume: str | None = None
     """a run's resume.pt: go on with that run (networks, optimizer, step counters, RNG, run
     directory) at this --learning-rate"""
@@ -259,7 +263,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                             render_mode=args.render_mode, max_steps_per_video=args.num_eval_steps)
     envs, eval_envs = make_envs(env_spec, eval_spec, num_envs=num_envs,
                                 num_eval_envs=args.num_eval_envs, workers=args.num_workers,
-                                device=device)
+                                device=device, shared_memory=args.env_shared_memory,
+                                render_together=args.env_render_together)
     print(f"{args.env_id}: MODE {mode}, horizon {horizon}, {num_envs} envs, "
           f"{args.num_eval_envs} eval envs, device {device}; "
           f"env workers ready in {time.time() - launched:.0f} s")

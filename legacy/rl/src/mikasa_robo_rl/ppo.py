@@ -76,13 +76,15 @@ def run_directory(
 
 def make_envs(
     train_spec: SubEnvSpec, eval_spec: SubEnvSpec, *, num_envs: int, num_eval_envs: int,
-    workers: int | None, device: torch.device,
+    workers: int | None, device: torch.device, shared_memory: bool = False, render_together: bool = False,
 ) -> tuple[CpuVectorEnv, CpuVectorEnv]:
     """(training envs, eval envs): ``num_envs`` / ``num_eval_envs`` CPU sub-envs of each spec in
-    ``workers`` processes (None: one per core), batched (§3.2), their tensors on ``device``."""
-    envs = CpuVectorEnv(train_spec, num_envs, workers, device)
+    ``workers`` processes (None: one per core), batched (§3.2), their tensors on ``device``;
+    ``shared_memory`` / ``render_together`` as ``CpuVectorEnv`` takes them."""
+    options = dict(shared_memory=shared_memory, render_together=render_together)
+    envs = CpuVectorEnv(train_spec, num_envs, workers, device, **options)
     try:
-        eval_envs = CpuVectorEnv(eval_spec, num_eval_envs, workers, device)
+        eval_envs = CpuVectorEnv(eval_spec, num_eval_envs, workers, device, **options)
     except BaseException:
         envs.close()
         raise
