@@ -5,9 +5,9 @@ Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
 
 * training, ``forward(batch)``: every camera ``(B, T, C, H, W)`` in [0, 1], the state
   ``(B, T, S)`` and the actions ``(B, T, A)`` normalised by the preprocessor, ``action_is_pad``
-  ``(B, T)``, ``task`` (B instructions). Returns the L1 loss over the steps that are not
-  padding, each step weighted by how much the demonstrator's action changes there
-  (`keyframe_weights`); with ``chunk_size`` K > 1, step t is also scored on the actions of
+  ``(B, T)``, ``task`` (B instructions). Returns the L1 loss (with ``action_bins``, the
+  cross-entropy over each dimension's bins) over the steps that are not padding, each step
+  weighted by how much the demonstrator's action changes there (`keyframe_weights`); with ``chunk_size`` K > 1, step t is also scored on the actions of
   steps t+1 .. t+K-1 that the sequence holds (`chunk_targets`).
 * acting, ``select_action(batch)``: every camera ``(B, C, H, W)``, the state ``(B, S)``, ``task``;
   one step of the GRU from the hidden state the previous call left (``reset()`` clears it at
@@ -192,8 +192,8 @@ class MemoryKeypoints(nn.Module):
     The readout's values are learned features of the cells, which the head ignores while the
     attention is still uniform, so nothing teaches the attention to look for the remembered
     colour. Here the output is the position itself: uniform attention gives the frame's
-    centre, and the action's error moves the weight towards the cells on the side the
-    demonstrator went, from the first step.
+    centre, and the action's error pulls the weight towards the side the demonstrator went.
+    (In a short CPU run on RememberColor3 its attention still stayed uniform; off by default.)
     """
 
     def __init__(self, cell_dim: int, hidden_dim: int, heads: int, dim: int = 32) -> None:
