@@ -216,6 +216,17 @@ else:
         with pytest.raises(SystemExit, match="hidden_dim"):
             train(npz_task, tmp_path / "other", 1, "--policy", "hiden_dim=3")
 
+    def test_a_directory_of_datasets_trains_one_policy_over_the_tasks(tmp_path: Path) -> None:
+        """``--data`` given a collection's data_npz stands for every task in it, each
+        episode with its own instruction; a directory without episodes is named."""
+        root = tmp_path / "data_npz"
+        write_synthetic_task(root, "RememberColor3-VLA-v0", [5, 4], instruction="colour")
+        write_synthetic_task(root, "ShellGameTouch-VLA-v0", [3], instruction="ball")
+        bank = memory_train.load_bank([str(root)], torch.device("cpu"), None)
+        assert sorted(bank.instruction) == ["ball", "colour", "colour"]
+        with pytest.raises(SystemExit, match="no episodes"):
+            memory_train.load_bank([str(tmp_path)], torch.device("cpu"), None)
+
     # ----------------------------------------------------------------------- the checkpoints
     @pytest.mark.parametrize("env_id", SHIPPED)
     def test_shipped_checkpoint_plays_an_episode(env_id: str, tmp_path: Path) -> None:

@@ -112,14 +112,29 @@ class EpisodeBank:
         }
 
 
+def dataset_dirs(path: str) -> list[Path]:
+    """``path`` itself if it holds episodes (``train_data_<i>.npz``), else each of its
+    subdirectories that does (a collection's ``data_npz``: one dataset per task)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise SystemExit(f"--data {path}: no such dataset directory")
+    if any(root.glob("train_data_*.npz")):
+        return [root]
+    found = sorted(d for d in root.iterdir() if d.is_dir() and any(d.glob("train_data_*.npz")))
+    if not found:
+        raise SystemExit(
+            f"--data {path}: no episodes (train_data_<i>.npz) in it or in its subdirectories"
+        )
+    return found
+
+
 def load_bank(paths: list[str], device: torch.device, max_episodes: int | None) -> EpisodeBank:
-    """The episodes of every dataset in ``paths`` (at most ``max_episodes`` from each)."""
+    """The episodes of every dataset in ``paths`` (at most ``max_episodes`` from each); a
+    path that holds several datasets (`dataset_dirs`) stands for all of them."""
     from mikasa_datasets.loaders import iter_episodes
 
     episodes: list[dict[str, Any]] = []
-    for path in paths:
-        if not Path(path).exists():
-            raise SystemExit(f"--data {path}: no such dataset directory")
+    for path in [d for p in paths for d in dataset_dirs(p)]:
         before = len(episodes)
         for episode in iter_episodes(path):
             if max_episodes is not None and len(episodes) - before >= max_episodes:
@@ -202,7 +217,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train the memory_gru LeRobot policy on whole episodes of MIKASA datasets.",
     )
     p.add_argument(
-        "--data", action="append", required=True, help="a dataset directory (repeatable)"
+        "--data",
+        action="append",
+        required=True,
+        help="a dataset directory, or a directory of them such as a collection's data_npz, "
+        "for one policy over several tasks (repeatable)",
     )
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--steps", type=int, default=3000, help="optimizer steps (default 3000)")
