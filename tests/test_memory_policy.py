@@ -161,6 +161,24 @@ else:
         loss.backward()
         assert torch.isfinite(loss) and "ce_loss" in info
 
+    def test_start_recall_adds_a_training_loss_and_leaves_acting_alone() -> None:
+        """With ``start_recall_weight`` the loss grows by the weighted recall of the first
+        frame, which trains; the actions are those of the same weights without it."""
+        plain, recall = tiny_policy(), tiny_policy(start_recall_weight=0.5)
+        assert recall.start_recall is not None and plain.start_recall is None
+        batch = sequence_batch(2, 4)
+        torch.manual_seed(1)
+        loss_plain, _ = plain.forward(batch)
+        torch.manual_seed(1)
+        loss, info = recall.forward(batch)
+        torch.testing.assert_close(loss, loss_plain + 0.5 * info["recall_loss"])
+        loss.backward()
+        assert recall.start_recall.weight.grad.abs().sum() > 0
+        with torch.no_grad():
+            torch.testing.assert_close(
+                recall.actions(batch, 2, 4)[0], plain.actions(batch, 2, 4)[0]
+            )
+
     def test_instruction_buckets_are_stable_words() -> None:
         idx, off = instruction_word_buckets(["Touch the RED cube.", ""], 1024)
         assert off.tolist() == [0, 4] and len(idx) == 5

@@ -82,6 +82,13 @@ class MemoryGRUConfig(PreTrainedConfig):
     # of each dimension (cross-entropy; the most likely one is acted on), so that where the
     # demonstrations go one of three ways, the policy picks one instead of their median.
     action_bins: int = 0
+    # An auxiliary loss with this weight (0: off): from every step's memory, a linear decoder
+    # predicts each camera's first frame of the sequence (with whole episodes, as
+    # mikasa-memory-train feeds them, the episode's start), average-pooled to
+    # start_recall_size x start_recall_size, so that what the cue showed is kept through the
+    # delay rather than left to fade until the decision needs it. Training only.
+    start_recall_weight: float = 0.0
+    start_recall_size: int = 16
     # Loss weight of a step: 1 + keyframe_weight * |a_t - a_(t-1)| (normalised actions), so
     # that the steps where the demonstrator changes course count (0: a plain mean).
     keyframe_weight: float = 10.0

@@ -328,6 +328,13 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 config.action_feature.shape[0] * config.chunk_size * max(config.action_bins, 1),
             ),
         )
+        # Training only: a decoder of the sequence's first frame from every step's memory
+        # (made last, so that the other layers' initial weights do not depend on it).
+        self.start_recall = (
+            nn.Linear(query_dim, 3 * config.start_recall_size**2 * len(self.camera_keys))
+            if config.start_recall_weight > 0
+            else None
+        )
         self.reset()
 
     # -------------------------------------------------------------- lerobot's interface
@@ -364,7 +371,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             pad = shift_left(pad, lead) | (
                 torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
             )
-        raw, _ = self.actions(batch, b, t)  # (B, T, K, A) or, with bins, (B, T, K, A, bins)
+        raw, memory, _ = self._run(batch, b, t)  # raw: (B, T, K, A), with bins (..., bins)
         valid = (~pad).to(raw.dtype)
         weight = valid * keyframe_weights(batch[ACTION], valid, self.config.keyframe_weight)
         targets, target_weight = chunk_targets(batch[ACTION], weight, self.config.chunk_size)
@@ -376,7 +383,22 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             error = (raw - targets).abs().mean(dim=-1)  # (B, T, K)
         loss = (error * target_weight).sum() / target_weight.sum().clamp(min=1e-6)
         first = (error[:, :, 0] * valid).sum() / valid.sum().clamp(min=1.0)
-        return loss, {"ce_loss" if self.config.action_bins > 0 else "l1_loss": first.item()}
+        info = {"ce_loss" if self.config.action_bins > 0 else "l1_loss": first.item()}
+        if self.start_recall is not None:
+            # Every step's memory asked for a thumbnail of the episode's first frame.
+            size = self.config.start_recall_size
+            target = torch.cat(
+                [
+                    F.adaptive_avg_pool2d(batch[k][:, 0], size).flatten(1) - 0.5
+                    for k in self.camera_keys
+                ],
+                dim=-1,
+            )
+            recall = ((self.start_recall(memory) - target[:, None]) ** 2).mean(dim=-1)  # (B, T)
+            recall = (recall * valid).sum() / valid.sum().clamp(min=1.0)
+            loss = loss + self.config.start_recall_weight * recall
+            info["recall_loss"] = recall.item()
+        return loss, info
 
     def decode(self, raw: Tensor) -> Tensor:
         """The head's output -> actions ``(..., A)`` (normalised): itself under L1, the most
@@ -415,6 +437,18 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         """The action chunks ``(B, T, chunk_size, A)`` for ``T`` steps that follow the GRU
         state ``hidden`` and the episode attention's keys/values ``past`` (None: an episode's
         start), and both after them."""
+        chunks, _, state = self._run(batch, b, t, hidden, past)
+        return chunks, state
+
+    def _run(
+        self,
+        batch: dict[str, Tensor],
+        b: int,
+        t: int,
+        hidden: Tensor | None = None,
+        past: tuple[Tensor, Tensor] | None = None,
+    ) -> tuple[Tensor, Tensor, tuple[Tensor, tuple[Tensor, Tensor] | None]]:
+        """`actions`, with the memory of every step ``(B, T, query_dim)`` as well."""
         parts, cells = [], []
         for key in self.camera_keys:
             images = batch[key].flatten(0, 1)
@@ -444,7 +478,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
         if self.config.action_bins > 0:
             chunks = chunks.unflatten(-1, (-1, self.config.action_bins))
-        return chunks, (hidden, past)
+        return chunks, memory, (hidden, past)
 
     def _instruction(
         self, batch: dict[str, Tensor], b: int, t: int, device: torch.device
