@@ -371,7 +371,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             pad = shift_left(pad, lead) | (
                 torch.arange(t, device=pad.device)[None] + lead[:, None] >= t
             )
-        raw, memory, _ = self._run(batch, b, t)  # raw: (B, T, K, A), with bins (..., bins)
+        raw, memory, _ = self.actions(batch, b, t)  # raw: (B, T, K, A), with bins (..., bins)
         valid = (~pad).to(raw.dtype)
         weight = valid * keyframe_weights(batch[ACTION], valid, self.config.keyframe_weight)
         targets, target_weight = chunk_targets(batch[ACTION], weight, self.config.chunk_size)
@@ -417,7 +417,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 "same episode; call reset() when the set of episodes changes"
             )
         step = {k: (v.unsqueeze(1) if isinstance(v, Tensor) else v) for k, v in batch.items()}
-        raw, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
+        raw, _, (self._hidden, self._past) = self.actions(step, b, 1, self._hidden, self._past)
         return self.decode(raw)[:, :, 0]
 
     @torch.no_grad()
@@ -433,22 +433,11 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         t: int,
         hidden: Tensor | None = None,
         past: tuple[Tensor, Tensor] | None = None,
-    ) -> tuple[Tensor, tuple[Tensor, tuple[Tensor, Tensor] | None]]:
-        """The action chunks ``(B, T, chunk_size, A)`` for ``T`` steps that follow the GRU
-        state ``hidden`` and the episode attention's keys/values ``past`` (None: an episode's
-        start), and both after them."""
-        chunks, _, state = self._run(batch, b, t, hidden, past)
-        return chunks, state
-
-    def _run(
-        self,
-        batch: dict[str, Tensor],
-        b: int,
-        t: int,
-        hidden: Tensor | None = None,
-        past: tuple[Tensor, Tensor] | None = None,
     ) -> tuple[Tensor, Tensor, tuple[Tensor, tuple[Tensor, Tensor] | None]]:
-        """`actions`, with the memory of every step ``(B, T, query_dim)`` as well."""
+        """The action chunks ``(B, T, chunk_size, A)`` (with bins ``(..., A, bins)``) and the
+        memory ``(B, T, query_dim)`` of ``T`` steps that follow the GRU state ``hidden`` and
+        the episode attention's keys/values ``past`` (None: an episode's start), and both
+        after them."""
         parts, cells = [], []
         for key in self.camera_keys:
             images = batch[key].flatten(0, 1)
