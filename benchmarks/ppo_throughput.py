@@ -23,6 +23,9 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 TRAINER = ROOT / "legacy/rl/baselines/ppo/ppo_memtasks.py"
@@ -33,21 +36,26 @@ MODE_FLAGS = {
 }
 
 
+def random_actions(space: Any, n: int, rng: np.random.Generator | None = None) -> np.ndarray:
+    """``n`` actions drawn uniformly from a Box ``space``, float32 ``(n, *shape)``."""
+    low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
+    rng = np.random.default_rng() if rng is None else rng
+    return (low + (high - low) * rng.random((n, *low.shape))).astype(np.float32)
+
+
 def env_only(env_id: str, mode: str, num_envs: int, workers: int, steps: int, options: dict) -> dict:
     """Steps/s of the batched env alone with random actions (after one warm-up step);
     ``options``: ``CpuVectorEnv``'s ``shared_memory`` / ``render_together``."""
-    import torch
     from mikasa_robo_rl.vector_env import CpuVectorEnv, SubEnvSpec
 
     t0 = time.perf_counter()
     with CpuVectorEnv(SubEnvSpec(env_id, mode), num_envs, workers=workers, **options) as env:
         startup = time.perf_counter() - t0
         env.reset(seed=0)
-        low, high = (torch.as_tensor(b) for b in (env.single_action_space.low, env.single_action_space.high))
-        env.step(low + (high - low) * torch.rand(num_envs, *low.shape))
+        env.step(random_actions(env.single_action_space, num_envs))
         t0 = time.perf_counter()
         for _ in range(steps):
-            env.step(low + (high - low) * torch.rand(num_envs, *low.shape))
+            env.step(random_actions(env.single_action_space, num_envs))
         wall = time.perf_counter() - t0
     return dict(env_steps_per_s=num_envs * steps / wall, startup_s=startup)
 

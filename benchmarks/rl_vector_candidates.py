@@ -43,7 +43,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from ppo_throughput import write_figures  # this directory's PPO throughput script
+from ppo_throughput import random_actions, write_figures  # this directory's PPO throughput script
 
 CANDIDATES = ("pickle-queues", "shared-queues", "shared-threads", "gymnasium-shm", "gymnasium-pipes")
 
@@ -140,13 +140,11 @@ def measure(candidate: str, env_id: str, mode: str, num_envs: int, workers: int,
     try:
         batch.reset(seed=0)
         start_s = time.perf_counter() - t0
-        space = batch.single_action_space
-        low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
         rng = np.random.default_rng(0)
         for i in range(warmup + steps):
             if i == warmup:
                 t0 = time.perf_counter()
-            batch.step((low + (high - low) * rng.random((num_envs, *low.shape))).astype(np.float32))
+            batch.step(random_actions(batch.single_action_space, num_envs, rng))
         elapsed = time.perf_counter() - t0
     finally:
         batch.close()

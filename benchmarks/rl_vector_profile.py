@@ -31,14 +31,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from ppo_throughput import write_figures  # this directory's PPO throughput script
+from ppo_throughput import random_actions, write_figures  # this directory's PPO throughput script
 
 MODES = ("state", "rgb", "rgb_joints")
-
-
-def _random_actions(space: Any, n: int) -> np.ndarray:
-    low, high = np.asarray(space.low, np.float32), np.asarray(space.high, np.float32)
-    return (low + (high - low) * np.random.rand(n, *low.shape)).astype(np.float32)
 
 
 def _median_s(fn: Any, repeats: int) -> float:
@@ -61,7 +56,7 @@ def profile_mode(env_id: str, mode: str, num_envs: int, workers: int, steps: int
     env = spec.make()
     try:
         env.reset(seed=0)
-        action = torch.as_tensor(_random_actions(env.single_action_space, 1))
+        action = torch.as_tensor(random_actions(env.single_action_space, 1))
 
         def one_step() -> tuple:
             out = env.step(action)
@@ -87,7 +82,7 @@ def profile_mode(env_id: str, mode: str, num_envs: int, workers: int, steps: int
     # The whole batched step with worker processes.
     with CpuVectorEnv(spec, num_envs, workers=workers) as venv:
         venv.reset(seed=0)
-        actions = _random_actions(venv.single_action_space, num_envs)
+        actions = random_actions(venv.single_action_space, num_envs)
         venv.step(actions)
         measured_s = _median_s(lambda: venv.step(actions), steps)
 

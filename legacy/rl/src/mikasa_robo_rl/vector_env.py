@@ -148,7 +148,8 @@ def _to_numpy(tree: Any) -> Any:
 
 
 def _leaves(tree: Any, path: tuple[str, ...] = ()) -> list[tuple[tuple[str, ...], Any]]:
-    """The arrays of a (nested) dict observation with their key paths."""
+    """The leaves of a (nested) dict observation, or of its ``spaces.Dict``, with their key
+    paths."""
     if isinstance(tree, Mapping):
         return [leaf for k, v in tree.items() for leaf in _leaves(v, (*path, k))]
     return [(path, tree)]
@@ -356,8 +357,9 @@ class CpuVectorEnv:
         self.max_episode_steps = find_max_episode_steps_value(probe)
         self._shared: SharedObservations | None = None
         if shared_memory and workers > 0:
-            sample = _to_numpy(probe.reset(seed=0)[0])
-            layout = {path: (tuple(v.shape[1:]), v.dtype.str) for path, v in _leaves(sample)}
+            # The wrapper chain's observation space says each leaf's shape and dtype.
+            leaves = _leaves(self.single_observation_space)
+            layout = {path: (tuple(space.shape), space.dtype.str) for path, space in leaves}
             self._shared = SharedObservations(layout, self.num_envs)
         probe.close()
         self._inline: _SubEnvs | None = None
