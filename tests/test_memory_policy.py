@@ -94,12 +94,26 @@ else:
         assert PreTrainedConfig.get_choice_class("memory_gru") is MemoryGRUConfig
 
     @pytest.mark.parametrize(
-        ("attention", "chunk", "color", "points", "bins"),
-        [(0, 1, 0, 0, 0), (8, 1, 0, 0, 0), (0, 4, 3, 0, 0), (8, 2, 3, 2, 5)],
-        ids=["gru", "gru+episode-attention", "gru+chunks+colour", "all"],
+        ("attention", "chunk", "color", "points", "bins", "keys"),
+        [
+            (0, 1, 0, 0, 0, "cells"),
+            (8, 1, 0, 0, 0, "cells"),
+            (0, 4, 3, 0, 0, "cells"),
+            (8, 2, 3, 2, 5, "cells"),
+            (0, 2, 3, 2, 0, "color"),
+            (8, 2, 3, 2, 5, "pointer"),
+        ],
+        ids=[
+            "gru",
+            "gru+episode-attention",
+            "gru+chunks+colour",
+            "all",
+            "colour-keypoints",
+            "pointer",
+        ],
     )
     def test_acting_step_by_step_equals_the_training_pass(
-        attention: int, chunk: int, color: int, points: int, bins: int
+        attention: int, chunk: int, color: int, points: int, bins: int, keys: str
     ) -> None:
         """select_action over an episode, one frame at a time, predicts exactly what the
         training pass predicts for the whole sequence (the first action of each step's chunk):
@@ -109,6 +123,8 @@ else:
             chunk_size=chunk,
             color_dim=color,
             keypoint_heads=points,
+            keypoint_keys="color" if keys == "pointer" else keys,
+            head_sees_memory=keys != "pointer",
             action_bins=bins,
         )
         batch = sequence_batch(2, 6)
@@ -118,6 +134,25 @@ else:
         for t in range(6):
             step = {k: (v[:, t] if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
             torch.testing.assert_close(policy.select_action(step), whole[:, t])
+
+    def test_colour_keypoints_and_a_head_that_sees_only_points() -> None:
+        """With ``keypoint_keys='color'`` the attention's keys are the cells' colour features
+        alone; with ``head_sees_memory=False`` the head sees the points and the state only;
+        bad settings are refused, naming what is accepted."""
+        policy = tiny_policy(keypoint_heads=2, keypoint_keys="color", color_dim=3)
+        assert [heads.key.in_features for heads in policy.keypoints.values()] == [3, 3]
+        # Without the memory in the head, the action depends on the memory only through the
+        # points: the readouts are not built, and the head sees the points and the state.
+        pointer = tiny_policy(keypoint_heads=2, keypoint_keys="color", head_sees_memory=False)
+        assert not pointer.readouts
+        assert pointer.head[0].in_features == 2 * 2 * 2 + TINY["state_dim"]
+        pointer.forward(sequence_batch(2, 3))[0].backward()
+        with pytest.raises(ValueError, match="keypoint_heads > 0"):
+            tiny_policy(head_sees_memory=False)
+        with pytest.raises(ValueError, match="'cells' or 'color'"):
+            tiny_policy(keypoint_heads=2, keypoint_keys="colour")
+        with pytest.raises(ValueError, match="color_dim > 0"):
+            tiny_policy(keypoint_heads=2, keypoint_keys="color", color_dim=0)
 
     @pytest.mark.parametrize("chunk", [1, 3])
     def test_leading_padding_is_where_the_episode_starts(chunk: int) -> None:

@@ -67,6 +67,15 @@ class MemoryGRUConfig(PreTrainedConfig):
     # Per camera, this many attention heads queried by the GRU's state whose output is the
     # attended cells' mean image position (where the remembered thing is); 0 turns it off.
     keypoint_heads: int = 0
+    # What those heads compare the query with: "cells" (every feature of a cell) or "color"
+    # (only its colour features, color_dim > 0). Matching on colour alone cannot learn the
+    # layouts of the training episodes, only which colour to look for.
+    keypoint_keys: str = "cells"
+    # Whether the action head sees the memory and the readouts. False: it sees only where the
+    # keypoint heads point and the robot's state, so the memory acts by pointing at a place in
+    # view; a head that sees the memory's features can fit the training episodes' layouts
+    # instead of learning what to look for (RememberColor3, in a supervised test).
+    head_sees_memory: bool = True
     # Attention from each step over every earlier step's inputs, so that what the cue showed
     # can be looked up when the decision comes rather than carried through the delay by the
     # GRU alone; 0 turns it off.
@@ -111,6 +120,16 @@ class MemoryGRUConfig(PreTrainedConfig):
             raise ValueError(f"chunk_size must be >= 1, got {self.chunk_size}")
         if self.action_bins == 1 or self.action_bins < 0:
             raise ValueError(f"action_bins must be 0 (L1) or >= 2, got {self.action_bins}")
+        if self.keypoint_keys not in ("cells", "color"):
+            raise ValueError(
+                f"keypoint_keys must be 'cells' or 'color', got {self.keypoint_keys!r}"
+            )
+        if self.keypoint_keys == "color" and self.keypoint_heads > 0 and self.color_dim <= 0:
+            raise ValueError(
+                "keypoint_keys='color' needs color_dim > 0 (the cells' colour features)"
+            )
+        if not self.head_sees_memory and self.keypoint_heads <= 0:
+            raise ValueError("head_sees_memory=False needs keypoint_heads > 0 (what the head sees)")
         if len(self.vision_channels) != 3:
             raise ValueError(f"vision_channels needs 3 entries, got {self.vision_channels}")
 

@@ -305,21 +305,28 @@ class MemoryGRUPolicy(PreTrainedPolicy):
                 )
                 for name in names
             }
-            if config.readout_dim > 0
+            if config.readout_dim > 0 and config.head_sees_memory
             else {}
         )
         self.keypoints = nn.ModuleDict(
             {
                 name: MemoryKeypoints(
-                    self.encoders[name].cell_dim, query_dim, config.keypoint_heads
+                    config.color_dim
+                    if config.keypoint_keys == "color"
+                    else self.encoders[name].cell_dim,
+                    query_dim,
+                    config.keypoint_heads,
                 )
                 for name in names
             }
             if config.keypoint_heads > 0
             else {}
         )
-        head_in = query_dim + config.readout_dim * len(self.readouts)
-        head_in += 2 * config.keypoint_heads * len(self.keypoints)
+        head_in = 2 * config.keypoint_heads * len(self.keypoints)
+        if config.head_sees_memory:
+            head_in += query_dim + config.readout_dim * len(self.readouts)
+        elif self.state_proj is not None:
+            head_in += config.state_dim
         self.head = nn.Sequential(
             nn.Linear(head_in, config.head_dim),
             nn.ReLU(),
@@ -450,19 +457,26 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             parts.append(self.state_proj(batch[OBS_STATE]))
         if self.instruction is not None:
             parts.append(self._instruction(batch, b, t, parts[0].device))
+        state = parts[len(self.camera_keys)] if self.state_proj is not None else None
         steps = torch.cat(parts, dim=-1)
         memory, hidden = self.gru(steps, hidden)
         if self.episode_attention is not None:
             recalled, past = self.episode_attention(memory, steps, past)
             memory = torch.cat([memory, recalled], dim=-1)
-        read = [memory]
+        if self.config.head_sees_memory:
+            read = [memory]
+        else:  # the memory acts only through where the keypoint heads point
+            read = [state] if state is not None else []
         queries = memory.flatten(0, 1)
         for key, grid in zip(self.camera_keys, cells, strict=True):
             name = key.replace(".", "_")
             if self.readouts:
                 read.append(self.readouts[name](queries, grid).view(b, t, -1))
             if self.keypoints:
-                points = self.keypoints[name](queries, grid, self.encoders[name].coords)
+                # The colour features are the cells' last color_dim (CameraEncoder).
+                colour_only = self.config.keypoint_keys == "color"
+                keys = grid[..., -self.config.color_dim :] if colour_only else grid
+                points = self.keypoints[name](queries, keys, self.encoders[name].coords)
                 read.append(points.view(b, t, -1))
         chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
         if self.config.action_bins > 0:
