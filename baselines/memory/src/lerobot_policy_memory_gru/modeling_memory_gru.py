@@ -453,11 +453,11 @@ class MemoryGRUPolicy(PreTrainedPolicy):
             vector, grid = self.encoders[key.replace(".", "_")](images)
             parts.append(vector.view(b, t, -1))
             cells.append(grid)
-        if self.state_proj is not None:
-            parts.append(self.state_proj(batch[OBS_STATE]))
+        state = self.state_proj(batch[OBS_STATE]) if self.state_proj is not None else None
+        if state is not None:
+            parts.append(state)
         if self.instruction is not None:
             parts.append(self._instruction(batch, b, t, parts[0].device))
-        state = parts[len(self.camera_keys)] if self.state_proj is not None else None
         steps = torch.cat(parts, dim=-1)
         memory, hidden = self.gru(steps, hidden)
         if self.episode_attention is not None:
