@@ -73,7 +73,7 @@ class Probe(nn.Module):
         elif reader in ("keypoints", "color-keypoints"):
             self.reads = nn.ModuleList(
                 MemoryKeypoints(
-                    COLOR_DIM if reader == "color-keypoints" else e.cell_dim, QUERY_DIM, 4
+                    e.color_dim if reader == "color-keypoints" else e.cell_dim, QUERY_DIM, 4
                 )
                 for e in self.encoders
             )
@@ -98,7 +98,7 @@ class Probe(nn.Module):
                 if self.reader == "readout":
                     read.append(module(memory, cells))
                     continue
-                keys = cells[..., -COLOR_DIM:] if self.reader == "color-keypoints" else cells
+                keys = encoder.cell_colors(cells) if self.reader == "color-keypoints" else cells
                 read.append(module(memory, keys, encoder.coords))
         parts = read if self.head_input == "points" else [memory, *read]
         return self.classifier(torch.cat(parts, dim=-1))

@@ -7,8 +7,9 @@ Shapes (lerobot's batch keys; ``S`` = state size, ``A`` = action size):
   ``(B, T, S)`` and the actions ``(B, T, A)`` normalised by the preprocessor, ``action_is_pad``
   ``(B, T)``, ``task`` (B instructions). Returns the L1 loss (with ``action_bins``, the
   cross-entropy over each dimension's bins) over the steps that are not padding, each step
-  weighted by how much the demonstrator's action changes there (`keyframe_weights`); with ``chunk_size`` K > 1, step t is also scored on the actions of
-  steps t+1 .. t+K-1 that the sequence holds (`chunk_targets`).
+  weighted by how much the demonstrator's action changes there (`keyframe_weights`); with
+  ``chunk_size`` K > 1, step t is also scored on the actions of steps t+1 .. t+K-1 that the
+  sequence holds (`chunk_targets`).
 * acting, ``select_action(batch)``: every camera ``(B, C, H, W)``, the state ``(B, S)``, ``task``;
   one step of the GRU from the hidden state the previous call left (``reset()`` clears it at
   an episode's start). Returns ``(B, A)``, normalised (the postprocessor undoes it).
@@ -144,6 +145,7 @@ class CameraEncoder(nn.Module):
         self.color = (
             nn.Sequential(nn.Conv2d(c, color_dim, kernel_size=1), nn.ReLU()) if color_dim else None
         )
+        self.color_dim = color_dim
         self.cell_dim = c2 + 2 + color_dim
         self.out_dim = out_dim + color_dim
         self.proj = nn.Sequential(nn.Linear(flat, out_dim), nn.LayerNorm(out_dim), nn.ReLU())
@@ -160,6 +162,10 @@ class CameraEncoder(nn.Module):
             cells.append(pooled.flatten(2).transpose(1, 2))
             vector = torch.cat([vector, colors.amax(dim=(2, 3))], dim=-1)
         return vector, torch.cat(cells, dim=-1)
+
+    def cell_colors(self, cells: Tensor) -> Tensor:
+        """The colour features of ``cells (N, K, cell_dim)``, ``(N, K, color_dim)``."""
+        return cells[..., self.cell_dim - self.color_dim :]
 
 
 class MemoryReadout(nn.Module):
@@ -311,7 +317,7 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         self.keypoints = nn.ModuleDict(
             {
                 name: MemoryKeypoints(
-                    config.color_dim
+                    self.encoders[name].color_dim
                     if config.keypoint_keys == "color"
                     else self.encoders[name].cell_dim,
                     query_dim,
@@ -468,15 +474,15 @@ class MemoryGRUPolicy(PreTrainedPolicy):
         else:  # the memory acts only through where the keypoint heads point
             read = [state] if state is not None else []
         queries = memory.flatten(0, 1)
+        colour_keys = self.config.keypoint_keys == "color"
         for key, grid in zip(self.camera_keys, cells, strict=True):
             name = key.replace(".", "_")
+            encoder = self.encoders[name]
             if self.readouts:
                 read.append(self.readouts[name](queries, grid).view(b, t, -1))
             if self.keypoints:
-                # The colour features are the cells' last color_dim (CameraEncoder).
-                colour_only = self.config.keypoint_keys == "color"
-                keys = grid[..., -self.config.color_dim :] if colour_only else grid
-                points = self.keypoints[name](queries, keys, self.encoders[name].coords)
+                keys = encoder.cell_colors(grid) if colour_keys else grid
+                points = self.keypoints[name](queries, keys, encoder.coords)
                 read.append(points.view(b, t, -1))
         chunks = self.head(torch.cat(read, dim=-1)).view(b, t, self.config.chunk_size, -1)
         if self.config.action_bins > 0:
